@@ -1,0 +1,230 @@
+"""The ``cosim`` command: a thin layer over the library.
+
+Every command takes ``--json`` (one JSON object on stdout, progress and messages on stderr) and exits
+non-zero with a one-line ``error: ...`` on bad input, never a traceback (set ``COSIM_DEBUG=1`` to see one).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from .errors import CosimError, InvalidSettingError
+from .numbers import parse_number
+
+__all__ = ["main"]
+
+
+def _emit(as_json: bool, payload: dict[str, Any], text: str) -> None:
+    if as_json:
+        click.echo(json.dumps(payload, default=float))
+    else:
+        click.echo(text)
+
+
+def _friendly(func: Callable) -> Callable:
+    """Turn library errors into one line on stderr and exit status 1 (2 for internal errors)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except CosimError as exc:
+            if os.environ.get("COSIM_DEBUG"):
+                raise
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            click.echo("error: interrupted", err=True)
+            sys.exit(130)
+        except Exception as exc:  # a bug of ours: still one line, with the way to see more
+            if os.environ.get("COSIM_DEBUG"):
+                raise
+            click.echo(f"error: internal error {type(exc).__name__}: {exc} (set COSIM_DEBUG=1 for the "
+                       "traceback and report it)", err=True)
+            sys.exit(2)
+
+    return wrapper
+
+
+def _pairs(items: tuple[str, ...], option: str) -> dict[str, str]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise InvalidSettingError(f"{option} takes NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _resolve_fmu(path: str) -> Path:
+    """`bundled` (or `bundled3` for FMI 3.0) names the bundled two-mass servo FMU."""
+    if path in ("bundled", "bundled3"):
+        from .build import build_fmu
+
+        return build_fmu(fmi_version="3.0" if path == "bundled3" else "2.0")
+    return Path(path)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
+@click.version_option(package_name="cosim")
+def main() -> None:
+    """cosim: identify, diagnose and control machines with FMU plants.
+
+    \b
+    Example:
+      cosim fmu build
+      cosim simulate bundled --input Tm=square:amp=0.1,freq=2 --duration 4 --dt 1/2257 -o data.csv
+      cosim demo
+    """
+
+
+@main.group()
+def fmu() -> None:
+    """Build and inspect FMUs."""
+
+
+@fmu.command("build")
+@click.option("--fmi", "fmi_version", type=click.Choice(["2.0", "3.0"]), default="2.0", show_default=True,
+              help="FMI version of the FMU to build.")
+@click.option("--force", is_flag=True, help="Rebuild even if the cache holds it.")
+@click.option("--json", "as_json", is_flag=True, help="Print {\"path\": ...} as JSON.")
+@_friendly
+def fmu_build(fmi_version: str, force: bool, as_json: bool) -> None:
+    """Build the bundled two-mass servo FMU from its C source (cached) and print its path.
+
+    \b
+    Example:
+      cosim fmu build --fmi 3.0 --json
+    """
+    from .build import build_fmu
+
+    path = build_fmu(fmi_version=fmi_version, force=force)
+    _emit(as_json, {"path": str(path), "fmi_version": fmi_version}, str(path))
+
+
+@fmu.command("info")
+@click.argument("path")
+@click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
+@_friendly
+def fmu_info(path: str, as_json: bool) -> None:
+    """Describe an FMU: inputs, outputs, states, parameters with units and start values.
+
+    PATH is an .fmu file, or `bundled` for the bundled servo.
+
+    \b
+    Example:
+      cosim fmu info bundled
+    """
+    from .plant import open_model_description
+
+    fmu_path = _resolve_fmu(path)
+    md = open_model_description(fmu_path)
+
+    def describe(v: Any) -> dict[str, Any]:
+        d = {"name": v.name, "type": v.type, "unit": v.unit or "", "start": v.start,
+             "description": v.description or ""}
+        for key in ("min", "max"):
+            if getattr(v, key, None) not in (None, ""):
+                d[key] = getattr(v, key)
+        return d
+
+    groups = {c: [describe(v) for v in md.modelVariables if v.causality == c]
+              for c in ("input", "output", "parameter")}
+    states = [v.derivative.name for v in md.modelVariables if getattr(v, "derivative", None) is not None]
+    info = {
+        "path": str(fmu_path), "model": md.modelName, "fmi_version": md.fmiVersion,
+        "model_identifier": md.coSimulation.modelIdentifier, "generation_tool": md.generationTool,
+        "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
+        "states": states,
+        "default_step": getattr(md.defaultExperiment, "stepSize", None) if md.defaultExperiment else None,
+    }
+    lines = [f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, {md.generationTool or 'unknown tool'})",
+             f"  file: {fmu_path}"]
+    for title, key in (("inputs", "inputs"), ("outputs", "outputs"), ("parameters", "parameters")):
+        lines.append(f"  {title}:")
+        for d in info[key]:
+            rng = f"  [{d.get('min', '')}, {d.get('max', '')}]" if "min" in d or "max" in d else ""
+            lines.append(f"    {d['name']:<12} {d['start'] or '':>10} {d['unit']:<12}{rng}  {d['description']}")
+    lines.append(f"  states: {', '.join(states) or 'not declared'}")
+    _emit(as_json, info, "\n".join(lines))
+
+
+@main.command()
+@click.argument("path")
+@click.option("--input", "-i", "inputs", multiple=True, metavar="NAME=SPEC",
+              help="Input signal, e.g. Tm=square:amp=0.1,freq=2 (amp: fraction of the input's declared max). "
+                   "Kinds: square, sine, prbs, chirp, multisine, step, const, or a number.")
+@click.option("--duration", required=True, help="Length of the run [s].")
+@click.option("--dt", required=True, help="Communication step [s], e.g. 1/2257.")
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE", help="Parameter value, e.g. Fc=0.3.")
+@click.option("--start", "starts", multiple=True, metavar="NAME=VALUE", help="Start value, e.g. theta_m=-2.")
+@click.option("--noise", default="0", show_default=True,
+              help="Measurement noise level: std = level x std of the clean signal, per state/output.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise.")
+@click.option("-o", "--output", "out", type=click.Path(dir_okay=False), help="Write the trajectory (.csv or "
+              ".parquet).")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: long runs on a terminal).")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+@_friendly
+def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: tuple[str, ...],
+             starts: tuple[str, ...], noise: str, seed: int, out: str | None, progress: bool | None,
+             as_json: bool) -> None:
+    """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
+
+    PATH is an .fmu file, or `bundled` for the bundled servo.
+
+    \b
+    Example:
+      cosim simulate bundled --input Tm=square:amp=0.1,freq=2 --duration 4 --dt 1/2257 \\
+          --set Fc=0.3 --noise 0.1 --seed 0 -o data.csv
+    """
+    from .simulation import simulate as run
+
+    fmu_path = _resolve_fmu(path)
+    parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
+    start = {k: parse_number(v, what=f"--start {k}") for k, v in _pairs(starts, "--start").items()}
+    level = parse_number(noise, what="--noise")
+    traj = run(fmu_path, _pairs(inputs, "--input"), duration=parse_number(duration, what="--duration"),
+               dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress)
+    if level:
+        traj = traj.with_noise(level, seed=seed)
+    if out:
+        traj.write(out)
+    final = {name: float(traj[name][-1]) for name in traj.names}
+    summary = {"path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path), "samples": len(traj),
+               "dt": traj.meta["dt"], "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
+               "noise": level, "seed": seed, "final": final}
+    text = (f"simulated {len(traj)} samples of {', '.join(traj.names)}"
+            + (f" with {level:g} noise" if level else "") + (f"; wrote {out}" if out else ""))
+    _emit(as_json, summary, text)
+
+
+@main.command()
+@click.option("--out", "out_dir", default="cosim-demo", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for the results.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+@_friendly
+def demo(out_dir: str, as_json: bool) -> None:
+    """Run the main job on the bundled servo FMU and write its results (plots, data) to --out.
+
+    \b
+    Example:
+      cosim demo --out cosim-demo
+    """
+    from .demo import run_demo
+
+    result = run_demo(out_dir)
+    text = "\n".join(f"{k}: {v}" for k, v in result.items())
+    _emit(as_json, result, text)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
