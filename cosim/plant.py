@@ -489,7 +489,7 @@ class FmuPlant:
         """
         values = {**(values or {}), **kw}
         self._stage(values, only_parameters=True)
-        for name, value in values.items():
+        for name in values:
             var = self._vars[name]
             if var.variability == "tunable":
                 self._set_one(var, self._settings[name])

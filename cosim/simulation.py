@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -31,7 +31,7 @@ __all__ = ["simulate", "InputSpec", "sample_input"]
 
 #: What an input can be given as: a Signal (or any callable of time), a constant, samples at the
 #: communication points, or a signal spec string such as ``"square:amp=0.1,freq=2"``.
-InputSpec = Union[Signal, Callable[[np.ndarray], Any], float, np.ndarray, str]
+InputSpec = Signal | Callable[[np.ndarray], Any] | float | np.ndarray | str
 
 _PROGRESS_MIN_STEPS = 200_000  # below this a run takes well under a second: no bar
 _CHUNK = 4096
