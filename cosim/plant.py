@@ -200,11 +200,11 @@ class FmuPlant:
             dt = float(default.stepSize) if default is not None and default.stepSize else None
             if dt is None:
                 raise InvalidSettingError(f"{self.path.name} declares no default step size; pass dt=...")
-        self.dt = self._check_dt(dt)
+        self._dt = self._check_dt(dt)
         if not math.isfinite(t0):
             raise InvalidSettingError(f"t0 must be a finite number, got {t0}")
-        self.t0 = float(t0)
-        self._k = 0
+        self._t0 = float(t0)
+        self._counter = [0]  # steps taken since t0, shared with the bound step function
         self._settings: dict[str, Any] = {}
         self._stage(parameters or {}, only_parameters=True)
         self._stage(start or {}, only_parameters=False)
@@ -287,9 +287,19 @@ class FmuPlant:
         return self._vars
 
     @property
+    def dt(self) -> float:
+        """Communication step size [s], fixed for the plant's life (create a new plant for another)."""
+        return self._dt
+
+    @property
+    def t0(self) -> float:
+        """Start time [s]."""
+        return self._t0
+
+    @property
     def time(self) -> float:
         """Current simulation time, ``t0 + k*dt``."""
-        return self.t0 + self._k * self.dt
+        return self.t0 + self._counter[0] * self.dt
 
     # ------------------------------------------------------------------ FMI life cycle
     def _on_log(self, status: int, category: bytes | None, message: bytes | None) -> None:
@@ -356,37 +366,70 @@ class FmuPlant:
             function=function, status=status, time=at)
 
     def _bind_hot_path(self) -> None:
-        """Bind the set-inputs / do-step / get-outputs calls once, with preallocated buffers."""
+        """Bind the set-inputs / do-step / get-outputs calls once, with preallocated buffers.
+
+        The function objects are fresh (``dll[name]``, so FMPy's own stay untouched) and have no argtypes:
+        every argument is a prebuilt ctypes object, so ctypes converts nothing per call. This is what makes
+        a step cost about a third of FMPy's ``setReal``/``doStep``/``getReal``.
+        """
         dll = self._fmu.dll
-        vr = self._value_refs
         n_in, n_out = len(self.inputs), len(self.outputs)
-        self._u_vr = vr(self.inputs)
-        self._y_vr = vr(self.outputs)
-        self._u_buf = (ctypes.c_double * n_in)()
-        self._y_buf = (ctypes.c_double * n_out)()
-        self._y_view = np.frombuffer(self._y_buf, dtype=np.float64)
+        u_vr, y_vr = self._value_refs(self.inputs), self._value_refs(self.outputs)
+        u_buf, y_buf = (ctypes.c_double * n_in)(), (ctypes.c_double * n_out)()
+        self._u_buf, self._y_buf = u_buf, y_buf
+        y_view = np.frombuffer(y_buf, dtype=np.float64)
+        self._y_view = y_view
         self._n_in = n_in
-        self._n_in_c = ctypes.c_size_t(n_in)
-        self._n_out_c = ctypes.c_size_t(n_out)
-        pointer = ctypes.c_void_p
-        if self.fmi_version == "2.0":
-            self._set_name, self._step_name, self._get_name = "fmi2SetReal", "fmi2DoStep", "fmi2GetReal"
-        else:
-            self._set_name, self._step_name, self._get_name = "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"
-        # Fresh function objects (dll[name], not dll.name) so that FMPy's own argtypes stay untouched.
-        set_real, do_step, get_real = dll[self._set_name], dll[self._step_name], dll[self._get_name]
+        n_in_c, n_out_c = ctypes.c_size_t(n_in), ctypes.c_size_t(n_out)
+        comp = ctypes.c_void_p(self._fmu.component)
+        t_c, h_c = ctypes.c_double(self.t0), ctypes.c_double(self.dt)
+        t0, dt, counter, fail, bad_input = self.t0, self.dt, self._counter, self._raise_call_error, self._bad_input
+        v2 = self.fmi_version == "2.0"
+        names = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep",
+                                                                         "fmi3GetFloat64")
+        self._get_name = names[2]
+        set_real, do_step, get_real = (dll[name] for name in names)
         for f in (set_real, do_step, get_real):
             f.restype = ctypes.c_int
-        if self.fmi_version == "2.0":
-            set_real.argtypes = get_real.argtypes = [pointer, pointer, ctypes.c_size_t, pointer]
-            do_step.argtypes = [pointer, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+            f.argtypes = None
+        set_args = (comp, u_vr, n_in_c, u_buf) + (() if v2 else (n_in_c,))
+        get_args = (comp, y_vr, n_out_c, y_buf) + (() if v2 else (n_out_c,))
+        if v2:
+            step_args = (comp, t_c, h_c, ctypes.c_int(1))
         else:
-            set_real.argtypes = get_real.argtypes = [pointer, pointer, ctypes.c_size_t, pointer, ctypes.c_size_t]
-            do_step.argtypes = [pointer, ctypes.c_double, ctypes.c_double, ctypes.c_bool] + [pointer] * 4
-            self._flags = [ctypes.c_bool() for _ in range(3)]
-            self._last_time = ctypes.c_double()
-            self._step_out = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._last_time)]
-        self._set_real, self._do_step, self._get_real = set_real, do_step, get_real
+            flags = [ctypes.c_bool() for _ in range(3)]
+            last_time = ctypes.c_double()
+            step_args = (comp, t_c, h_c, ctypes.c_bool(True), *map(ctypes.byref, flags), ctypes.byref(last_time))
+            terminated = flags[1]
+
+        def step(u: Sequence[float]) -> np.ndarray:
+            try:
+                u_buf[:] = u
+            except (ValueError, TypeError):
+                bad_input(u)
+            k = counter[0]
+            t = t0 + k * dt
+            t_c.value = t
+            status = set_real(*set_args)
+            if status > 1:
+                fail(names[0], status, t)
+            status = do_step(*step_args)
+            if status > 1:
+                fail(names[1], status, t)
+            if not v2 and terminated.value:
+                fail(names[1] + " (terminateSimulation)", 3, t)
+            status = get_real(*get_args)
+            if status > 1:
+                fail(names[2], status, t + dt)
+            counter[0] = k + 1
+            return y_view.copy()
+
+        def read() -> int:
+            return get_real(*get_args)
+
+        step.__doc__ = FmuPlant.step.__doc__
+        self.step = step  # the instance's own, bound to this FMU's buffers
+        self._call_get = read
 
     def _value_refs(self, names: Sequence[str]) -> ctypes.Array:
         return (ctypes.c_uint32 * len(names))(*[self._vars[n].valueReference for n in names])
@@ -405,8 +448,7 @@ class FmuPlant:
         except Exception as exc:
             self._fmu_error("initialization", exc)
         self._initialized = True
-        self._k = 0
-        self._component = fmu.component
+        self._counter[0] = 0
 
     def _apply_settings(self) -> None:
         for name, value in self._settings.items():
@@ -470,11 +512,6 @@ class FmuPlant:
             self._raise_call_error(self._get_name, status, self.time)
         return self._y_view.copy()
 
-    def _call_get(self) -> int:
-        if self.fmi_version == "2.0":
-            return self._get_real(self._component, self._y_vr, self._n_out_c, self._y_buf)
-        return self._get_real(self._component, self._y_vr, self._n_out_c, self._y_buf, self._n_out_c)
-
     def set_parameters(self, values: Mapping[str, Any] | None = None, **kw: Any) -> None:
         """Set parameters by name; tunable ones take effect at once, fixed ones at the next :meth:`reset`.
 
@@ -526,33 +563,7 @@ class FmuPlant:
         numpy.ndarray
             The outputs in :attr:`outputs` order, at ``time`` (after the step).
         """
-        try:
-            self._u_buf[:] = u
-        except (ValueError, TypeError):
-            self._bad_input(u)
-        t = self.t0 + self._k * self.dt
-        if self.fmi_version == "2.0":
-            status = self._set_real(self._component, self._u_vr, self._n_in_c, self._u_buf)
-            if status > 1:
-                self._raise_call_error(self._set_name, status, t)
-            status = self._do_step(self._component, t, self.dt, 1)
-            if status > 1:
-                self._raise_call_error(self._step_name, status, t)
-            status = self._get_real(self._component, self._y_vr, self._n_out_c, self._y_buf)
-        else:
-            status = self._set_real(self._component, self._u_vr, self._n_in_c, self._u_buf, self._n_in_c)
-            if status > 1:
-                self._raise_call_error(self._set_name, status, t)
-            status = self._do_step(self._component, t, self.dt, True, *self._step_out)
-            if status > 1:
-                self._raise_call_error(self._step_name, status, t)
-            if self._flags[1].value:
-                self._raise_call_error(self._step_name + " (terminateSimulation)", 3, t)
-            status = self._get_real(self._component, self._y_vr, self._n_out_c, self._y_buf, self._n_out_c)
-        if status > 1:
-            self._raise_call_error(self._get_name, status, t)
-        self._k += 1
-        return self._y_view.copy()
+        return self.step(u)  # replaced per instance by the bound fast path (see _bind_hot_path)
 
     def _bad_input(self, u: Any) -> None:
         try:
@@ -587,7 +598,7 @@ class FmuPlant:
         """Terminate and free the instance, unload the library and delete the extracted files. Idempotent."""
         fmu, self._fmu = self._fmu, None
         # The library is unloaded below: the bound function pointers must never be called again.
-        self._set_real = self._do_step = self._get_real = self._closed
+        self.step = self._call_get = self._closed
         if fmu is not None:
             try:
                 if self._initialized:

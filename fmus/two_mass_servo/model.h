@@ -94,6 +94,9 @@ typedef struct {
     /* Tm at the end of initialization: the applied torque before any delayed input */
     double Tm_init;
     TmHistory hist;
+    /* derived from the parameters when initialization ends (parameters are fixed then) */
+    double inv_Jm, inv_JL, inv_vsmooth, inv_vs;
+    int has_friction, has_stribeck, has_backlash, has_cogging, has_gravity;
     ModelPhase phase;
     char msg[512]; /* last error message */
 } Model;

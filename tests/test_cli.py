@@ -1,0 +1,86 @@
+"""The `cosim` command: results on stdout (--json), one-line errors, non-zero exit, no traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cosim import Trajectory
+from cosim.cli import main
+
+
+def run(*args: str):
+    result = CliRunner().invoke(main, list(args), catch_exceptions=False)
+    return result
+
+
+def assert_clean_error(result, *fragments: str) -> None:
+    assert result.exit_code != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "Traceback" not in result.output + result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def test_fmu_build_json_gives_the_path():
+    result = run("fmu", "build", "--json")
+    assert result.exit_code == 0, result.stderr
+    payload = json.loads(result.stdout)
+    assert payload["path"].endswith("two_mass_servo.fmu")
+
+
+def test_fmu_info_lists_variables():
+    result = run("fmu", "info", "bundled", "--json")
+    info = json.loads(result.stdout)
+    assert [v["name"] for v in info["inputs"]] == ["Tm", "TL"]
+    assert {"Jm", "JL", "KL", "Bm", "BL", "Fc", "delay"} <= {p["name"] for p in info["parameters"]}
+    assert info["states"] == ["theta_m", "omega_m", "theta_L", "omega_L"]
+
+
+def test_simulate_the_issue_example(tmp_path):
+    out = tmp_path / "data.csv"
+    result = run("simulate", "bundled", "--input", "Tm=square:amp=0.1,freq=2", "--duration", "4", "--dt", "1/2257",
+                 "--set", "Fc=0.3", "--noise", "0.1", "--seed", "0", "-o", str(out), "--json")
+    assert result.exit_code == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["samples"] == 4 * 2257 + 1 and summary["noise"] == 0.1
+    traj = Trajectory.read(out)
+    assert traj.meta["parameters"]["Fc"] == 0.3
+    assert np.isclose(traj.dt, 1 / 2257, rtol=1e-9)
+    assert set(np.unique(traj["Tm"])) == {-500.0, 500.0}  # inputs carry no noise
+
+
+@pytest.mark.parametrize("args,fragments", [
+    (["simulate", "missing.fmu", "--duration", "1", "--dt", "0.01"], ["not found"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0"], ["positive"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "x/2"], ["--dt", "not a number"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0.01", "--set", "Jmm=3"], ["Jm"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0.01", "--set", "Fc"], ["NAME=VALUE"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0.01", "--input", "Tm=triangle:amp=1"], ["triangle"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0.01", "--input", "Tq=1"], ["Tq"]),
+    (["simulate", "bundled", "--duration", "1", "--dt", "0.01", "--noise", "-1"], ["noise"]),
+    (["fmu", "info", "missing.fmu"], ["not found"]),
+])
+def test_bad_input_is_one_line(args, fragments):
+    assert_clean_error(run(*args), *fragments)
+
+
+def test_failed_run_writes_no_file(tmp_path):
+    out = tmp_path / "data.csv"
+    result = run("simulate", "bundled", "--duration", "5", "--dt", "1e-3", "--set", "Bm=-2e5",
+                 "--start", "omega_m=1", "-o", str(out))
+    assert_clean_error(result, "fmi2DoStep", "t=")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_real_command_exits_nonzero_without_traceback():
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "simulate", "nowhere.fmu", "--duration", "1",
+                           "--dt", "0.1"], capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr

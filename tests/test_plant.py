@@ -1,0 +1,273 @@
+"""FmuPlant and simulate: discovery, settings, life cycle, errors; an FMU exported by pythonfmu."""
+
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+import sys
+import textwrap
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim import (
+    CosimError,
+    FmiCallError,
+    FmuFormatError,
+    FmuNotFoundError,
+    FmuPlant,
+    FmuPlatformError,
+    InvalidSettingError,
+    UnknownVariableError,
+    build_fmu,
+    simulate,
+)
+
+DT = 1 / 2257
+
+
+@pytest.fixture(scope="module")
+def fmu():
+    return build_fmu()
+
+
+def test_discovers_inputs_outputs_states_parameters(fmu):
+    with FmuPlant(fmu, dt=DT) as plant:
+        assert plant.inputs == ("Tm", "TL")
+        assert plant.outputs == ("theta_m", "omega_m", "theta_L", "omega_L")
+        assert plant.states == plant.outputs
+        params = plant.parameters
+        assert params["Jm"] == 250.0 and params["KL"] == 2.5e6 and params["Fc"] == 0.0
+        assert isinstance(params["nsub"], int)
+
+
+def test_parameters_and_start_values_are_applied(fmu):
+    with FmuPlant(fmu, dt=DT, parameters={"Jm": 400.0}, start={"theta_m": -2.0, "omega_L": 1.0}) as plant:
+        assert plant.parameters["Jm"] == 400.0
+        np.testing.assert_allclose(plant.read_outputs(), [-2.0, 0.0, 0.0, 1.0])
+
+
+def test_step_advances_time_and_is_reproducible_after_reset(fmu):
+    with FmuPlant(fmu, dt=DT, start={"omega_L": 0.5}) as plant:
+        first = np.array([plant.step([100.0, 0.0]) for _ in range(50)])
+        assert math.isclose(plant.time, 50 * DT, rel_tol=1e-15)
+        plant.reset()
+        assert plant.time == 0.0
+        again = np.array([plant.step([100.0, 0.0]) for _ in range(50)])
+    np.testing.assert_array_equal(first, again)
+
+
+def test_reset_with_new_parameters_changes_the_response(fmu):
+    with FmuPlant(fmu, dt=DT) as plant:
+        free = plant.run(np.tile([1000.0, 0.0], (200, 1)))
+        plant.reset(parameters={"Fc": 500.0})
+        assert plant.parameters["Fc"] == 500.0
+        braked = plant.run(np.tile([1000.0, 0.0], (200, 1)))
+    assert braked[-1, 1] < 0.8 * free[-1, 1]  # Coulomb friction slows the motor
+
+
+def test_step_of_a_closed_plant_is_refused_not_crashing(fmu):
+    plant = FmuPlant(fmu, dt=DT)
+    plant.close()
+    plant.close()  # idempotent
+    with pytest.raises(InvalidSettingError, match="closed"):
+        plant.step([0.0, 0.0])
+
+
+def test_simulate_returns_inputs_states_units_and_meta(fmu):
+    traj = simulate(fmu, {"Tm": "square:amp=0.1,freq=2"}, duration=1.0, dt=1e-3, parameters={"Fc": 10.0})
+    assert len(traj) == 1001
+    assert traj.inputs == ("Tm", "TL") and traj.states == ("theta_m", "omega_m", "theta_L", "omega_L")
+    assert set(np.unique(traj["Tm"])) == {-500.0, 500.0}  # 10 % of the declared max torque 5000 N m
+    assert np.all(traj["TL"] == 0.0)
+    assert traj.units[traj.names.index("omega_m")] == "rad/s"
+    assert traj.meta["parameters"]["Fc"] == 10.0 and traj.meta["dt"] == 1e-3
+    np.testing.assert_allclose(np.diff(traj.time), 1e-3, rtol=1e-9)
+
+
+# ---------------------------------------------------------------------- bad input, each with a clear error
+def one_line(exc: BaseException) -> str:
+    text = str(exc)
+    assert "\n" not in text and len(text) < 400, text
+    return text
+
+
+def test_missing_path(tmp_path):
+    with pytest.raises(FmuNotFoundError) as err:
+        FmuPlant(tmp_path / "nope.fmu", dt=DT)
+    assert "not found" in one_line(err.value) and isinstance(err.value, FileNotFoundError)
+
+
+def test_not_a_zip(tmp_path):
+    path = tmp_path / "text.fmu"
+    path.write_text("hello")
+    with pytest.raises(FmuFormatError, match="not a zip"):
+        FmuPlant(path, dt=DT)
+
+
+def test_zip_without_model_description(tmp_path):
+    path = tmp_path / "empty.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("readme.txt", "no model here")
+    with pytest.raises(FmuFormatError, match="modelDescription.xml"):
+        FmuPlant(path, dt=DT)
+
+
+def rewrite_fmu(src: Path, dst: Path, *, drop_prefix: str | None = None, edit=None) -> Path:
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            if drop_prefix and item.filename.startswith(drop_prefix):
+                continue
+            data = zin.read(item.filename)
+            if edit and item.filename == "modelDescription.xml":
+                data = edit(data.decode()).encode()
+            zout.writestr(item, data)
+    return dst
+
+
+def test_fmu_without_cosimulation(fmu, tmp_path):
+    import re
+
+    def to_model_exchange(xml: str) -> str:
+        return re.sub(r"<CoSimulation\b", "<ModelExchange", xml).replace("</CoSimulation>", "</ModelExchange>")
+
+    path = rewrite_fmu(fmu, tmp_path / "me.fmu", edit=to_model_exchange)
+    with pytest.raises(FmuFormatError, match="co-simulation"):
+        FmuPlant(path, dt=DT)
+
+
+def test_fmu_without_binary_for_this_platform(fmu, tmp_path):
+    path = rewrite_fmu(fmu, tmp_path / "nobin.fmu", drop_prefix="binaries/")
+    with pytest.raises(FmuPlatformError, match="no binary for this platform"):
+        FmuPlant(path, dt=DT)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"parameters": {"Jmm": 1.0}}, "Jm"),          # suggests the near name
+    ({"parameters": {"theta_m": 1.0}}, "not a parameter"),
+    ({"start": {"nothing": 1.0}}, "no variable named"),
+    ({"inputs": ["Tq"]}, "no real input"),
+])
+def test_unknown_names(fmu, kwargs, match):
+    with pytest.raises(UnknownVariableError, match=match) as err:
+        FmuPlant(fmu, dt=DT, **kwargs)
+    one_line(err.value)
+
+
+@pytest.mark.parametrize("dt", [0.0, -1e-3, float("nan"), "abc"])
+def test_non_positive_step(fmu, dt):
+    with pytest.raises(InvalidSettingError, match="step size"):
+        FmuPlant(fmu, dt=dt)
+
+
+def test_bad_parameter_values(fmu):
+    with pytest.raises(InvalidSettingError, match="whole number"):
+        FmuPlant(fmu, dt=DT, parameters={"nsub": 2.5})
+    with pytest.raises(InvalidSettingError, match="finite"):
+        FmuPlant(fmu, dt=DT, parameters={"Jm": float("inf")})
+
+
+def test_fmu_rejects_unphysical_parameter_at_initialisation(fmu):
+    with pytest.raises(FmiCallError) as err:
+        FmuPlant(fmu, dt=DT, parameters={"Jm": -1.0})
+    assert "Jm" in one_line(err.value)
+
+
+def test_wrong_number_of_inputs(fmu):
+    with FmuPlant(fmu, dt=DT) as plant, pytest.raises(InvalidSettingError, match="expected 2"):
+        plant.step([1.0])
+
+
+def test_error_status_mid_run_reports_time_and_function(fmu):
+    # negative damping makes the plant diverge; the FMU returns fmi2Error once a state passes 1e12
+    with FmuPlant(fmu, dt=DT, parameters={"Bm": -2e5}, start={"omega_m": 1.0}) as plant:
+        with pytest.raises(FmiCallError) as err:
+            for _ in range(100_000):
+                plant.step([0.0, 0.0])
+        exc = err.value
+        assert exc.function == "fmi2DoStep" and exc.status == 3
+        assert 0 < exc.time < 100_000 * DT
+        assert f"{exc.time:.9g}" in one_line(exc)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"duration": 1.0, "dt": 0.3}, "whole number of steps"),
+    ({"duration": -1.0, "dt": 0.1}, "positive"),
+])
+def test_simulate_bad_duration(fmu, kwargs, match):
+    with pytest.raises(InvalidSettingError, match=match):
+        simulate(fmu, {}, **kwargs)
+
+
+def test_simulate_unknown_input(fmu):
+    with pytest.raises(UnknownVariableError, match="Tq"):
+        simulate(fmu, {"Tq": 1.0}, duration=0.1, dt=0.01)
+
+
+def test_every_error_is_a_cosim_error():
+    for cls in (FmiCallError, FmuFormatError, FmuNotFoundError, FmuPlatformError, InvalidSettingError,
+                UnknownVariableError):
+        assert issubclass(cls, CosimError)
+
+
+# ---------------------------------------------------------------------- an FMU this project did not write
+PYTHONFMU_SOURCE = textwrap.dedent('''
+    import math
+    from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+    class FirstOrderLag(Fmi2Slave):
+        """y' = (u - y) / tau, integrated exactly over each step for a held input."""
+
+        author = "cosim tests"
+        description = "first-order lag"
+
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.u = 0.0
+            self.y = 0.0
+            self.tau = 0.5
+            self.register_variable(Real("u", causality=Fmi2Causality.input))
+            self.register_variable(Real("y", causality=Fmi2Causality.output))
+            self.register_variable(Real("tau", causality=Fmi2Causality.parameter,
+                                        variability=Fmi2Variability.tunable))
+
+        def do_step(self, current_time, step_size):
+            a = math.exp(-step_size / self.tau)
+            self.y = a * self.y + (1.0 - a) * self.u
+            return True
+''')
+
+
+@pytest.fixture(scope="module")
+def pythonfmu_fmu(tmp_path_factory):
+    pytest.importorskip("pythonfmu")
+    folder = tmp_path_factory.mktemp("pythonfmu")
+    script = folder / "FirstOrderLag.py"
+    script.write_text(PYTHONFMU_SOURCE)
+    exe = shutil.which("pythonfmu") or sys.executable
+    cmd = [exe, "build", "-f", str(script), "-d", str(folder)]
+    if exe == sys.executable:
+        cmd = [exe, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(folder)]
+    subprocess.run(cmd, check=True, capture_output=True)
+    return folder / "FirstOrderLag.fmu"
+
+
+def test_foreign_fmu_through_fmuplant(pythonfmu_fmu):
+    tau, dt = 0.2, 0.01
+    with FmuPlant(pythonfmu_fmu, dt=dt, parameters={"tau": tau}) as plant:
+        assert plant.inputs == ("u",) and plant.outputs == ("y",) and plant.states == ()
+        y = [plant.step([1.0])[0] for _ in range(100)]
+    expected = 1.0 - np.exp(-dt * np.arange(1, 101) / tau)
+    np.testing.assert_allclose(y, expected, rtol=1e-12)
+
+
+def test_foreign_fmu_through_simulate(pythonfmu_fmu):
+    traj = simulate(pythonfmu_fmu, {"u": "step:value=2,at=0.5"}, duration=1.0, dt=0.01, parameters={"tau": 0.1})
+    y, t = traj["y"], traj.time
+    assert np.all(y[t <= 0.5 + 1e-9] == 0.0)
+    np.testing.assert_allclose(y[-1], 2.0 * (1 - np.exp(-0.5 / 0.1)), rtol=1e-12)
+    assert traj.outputs == ("y",)
