@@ -72,12 +72,13 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--out", default=str(Path(__file__).parent / "results" / "step_speed"))
     args = parser.parse_args()
-    fmu = build_fmu()
-    loop_cosim(fmu, 1000), loop_fmpy(fmu, 1000)  # warm-up: imports, page cache
-    cosim_rates, fmpy_rates = [], []
+    fmu, fmu3 = build_fmu(), build_fmu(fmi_version="3.0")
+    loop_cosim(fmu, 1000), loop_fmpy(fmu, 1000), loop_cosim(fmu3, 1000)  # warm-up: imports, page cache
+    cosim_rates, fmpy_rates, fmi3_rates = [], [], []
     for _ in range(args.rounds):
         cosim_rates.append(loop_cosim(fmu, args.steps))
         fmpy_rates.append(loop_fmpy(fmu, args.steps))
+        fmi3_rates.append(loop_cosim(fmu3, args.steps))
     ratios = [a / b for a, b in zip(cosim_rates, fmpy_rates, strict=True)]
     result = {
         "benchmark": "closed loop, proportional law, bundled two_mass_servo FMI 2.0, dt=1/2257 s",
@@ -89,6 +90,7 @@ def main() -> None:
         "ratio_min": min(ratios),
         "ratio_max": max(ratios),
         "cosim_us_per_step": 1e6 / statistics.median(cosim_rates),
+        "cosim_fmi3_steps_per_s_median": statistics.median(fmi3_rates),
         "fmpy_us_per_step": 1e6 / statistics.median(fmpy_rates),
         "python": platform.python_version(),
         "fmpy": fmpy.__version__,
@@ -100,7 +102,9 @@ def main() -> None:
         "| loop | steps/s (median) | us/step |\n| --- | --- | --- |\n"
         f"| cosim FmuPlant.step | {result['cosim_steps_per_s_median']:,.0f} | {result['cosim_us_per_step']:.2f} |\n"
         f"| fmpy FMU2Slave setReal/doStep/getReal | {result['fmpy_steps_per_s_median']:,.0f} | "
-        f"{result['fmpy_us_per_step']:.2f} |\n\n"
+        f"{result['fmpy_us_per_step']:.2f} |\n"
+        f"| cosim FmuPlant.step, FMI 3.0 build | {result['cosim_fmi3_steps_per_s_median']:,.0f} | "
+        f"{1e6 / result['cosim_fmi3_steps_per_s_median']:.2f} |\n\n"
         f"ratio (median over {args.rounds} interleaved rounds of {args.steps} steps): "
         f"{result['ratio_median']:.2f} (min {result['ratio_min']:.2f}, max {result['ratio_max']:.2f})\n"
     )

@@ -207,6 +207,42 @@ def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: t
     _emit(as_json, summary, text)
 
 
+@main.group()
+def data() -> None:
+    """Inspect data files (trajectories as CSV or Parquet)."""
+
+
+@data.command("info")
+@click.argument("path")
+@click.option("--time", "time_column", default="time", show_default=True, help="Name of the time column [s].")
+@click.option("--columns", default=None, help="Comma-separated columns to read (default: all).")
+@click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
+@_friendly
+def data_info(path: str, time_column: str, columns: str | None, as_json: bool) -> None:
+    """Check a data file (NaN, time order, columns) and describe it: signals, units, roles, sampling.
+
+    \b
+    Example:
+      cosim data info data.csv --columns Tm,theta_L
+    """
+    from .trajectory import Trajectory
+
+    chosen = [c.strip() for c in columns.split(",")] if columns else None
+    traj = Trajectory.read(path, columns=chosen, time=time_column)
+    info = {
+        "path": str(Path(path).resolve()), "samples": len(traj), "t_start": float(traj.time[0]),
+        "t_end": float(traj.time[-1]), "dt": traj.dt, "uniform": traj.is_uniform(),
+        "signals": [{"name": n, "unit": u, "role": r, "min": float(traj[n].min()), "max": float(traj[n].max())}
+                    for n, u, r in zip(traj.names, traj.units, traj.roles, strict=True)],
+        "meta": traj.meta,
+    }
+    lines = [f"{path}: {len(traj)} samples, t = {info['t_start']:g} .. {info['t_end']:g} s, "
+             f"dt = {traj.dt:.6g} s ({'uniform' if info['uniform'] else 'NOT uniform'})"]
+    lines += [f"  {s['name']:<12} {s['role']:<7} [{s['unit']}]  {s['min']:.6g} .. {s['max']:.6g}"
+              for s in info["signals"]]
+    _emit(as_json, info, "\n".join(lines))
+
+
 @main.command()
 @click.option("--out", "out_dir", default="cosim-demo", show_default=True, type=click.Path(file_okay=False),
               help="Folder for the results.")

@@ -84,3 +84,23 @@ def test_real_command_exits_nonzero_without_traceback():
                            "--dt", "0.1"], capture_output=True, text=True)
     assert proc.returncode == 1
     assert proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("text,fragment", [
+    ("time,x\n0,1\n1,nan\n", "is nan at t=1"),
+    ("time,x\n0,1\n0,2\n", "increas"),
+    ("t,x\n0,1\n1,2\n", "time"),
+])
+def test_bad_data_files_are_one_line_errors(tmp_path, text, fragment):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    assert_clean_error(run("data", "info", str(path)), fragment)
+
+
+def test_data_info_missing_columns_and_good_file(tmp_path):
+    out = tmp_path / "d.csv"
+    assert run("simulate", "bundled", "--duration", "0.1", "--dt", "1e-3", "-o", str(out)).exit_code == 0
+    assert_clean_error(run("data", "info", str(out), "--columns", "theta_m,torque"), "torque")
+    info = json.loads(run("data", "info", str(out), "--json").stdout)
+    assert info["samples"] == 101 and info["uniform"] is True
+    assert {s["name"]: s["role"] for s in info["signals"]}["theta_L"] == "state"

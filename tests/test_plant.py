@@ -271,3 +271,10 @@ def test_foreign_fmu_through_simulate(pythonfmu_fmu):
     assert np.all(y[t <= 0.5 + 1e-9] == 0.0)
     np.testing.assert_allclose(y[-1], 2.0 * (1 - np.exp(-0.5 / 0.1)), rtol=1e-12)
     assert traj.outputs == ("y",)
+
+
+def test_example_closed_loop_asserts_its_result():
+    import runpy
+
+    figures = runpy.run_path(str(Path(__file__).parents[1] / "examples" / "closed_loop_pd.py"))["main"]()
+    assert figures["settling_time_2pct_s"] < 1.0
