@@ -4,6 +4,8 @@ Pipeline stages, one module each: ``build`` (FMUs from C source), ``plant`` (:cl
 ``signals`` (excitations), ``trajectory`` (:class:`Trajectory`), ``simulation`` (:func:`simulate`).
 """
 
+import logging
+
 from . import signals
 from .build import build_fmu, fmu_cache_dir
 from .errors import (
@@ -23,6 +25,9 @@ from .simulation import simulate
 from .trajectory import Trajectory
 
 __version__ = "0.1.0"
+
+# A library logs, the application decides where to: FMUs' messages go to logger "cosim.fmu".
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __all__ = [
     "BuildError",

@@ -349,7 +349,6 @@ class FmuPlant:
         except Exception as exc:
             self._fmu_error("fmi2Instantiate" if self.fmi_version == "2.0" else "fmi3InstantiateCoSimulation",
                             exc)
-        self._instantiated = True
         self._bind_hot_path()
 
     def _fmu_error(self, function: str, exc: Exception, status: int = 3) -> None:
@@ -358,12 +357,11 @@ class FmuPlant:
         self._raise_call_error(function, status)
 
     def _raise_call_error(self, function: str, status: int, at: float | None = None) -> None:
-        last = f": {self._messages[-1]}" if self._messages else ""
         when = f" at t={at:.9g} s" if at is not None else ""
-        raise FmiCallError(
-            f"{self.path.name}: {function} returned {_status_name(status)}{when}{last}; "
-            "check the parameters, start values and inputs (the FMU's log is on logger 'cosim.fmu')",
-            function=function, status=status, time=at)
+        advice = (f": the FMU says: {self._messages[-1]}" if self._messages
+                  else "; check the parameters, start values and inputs")
+        raise FmiCallError(f"{self.path.name}: {function} returned {_status_name(status)}{when}{advice}",
+                           function=function, status=status, time=at)
 
     def _bind_hot_path(self) -> None:
         """Bind the set-inputs / do-step / get-outputs calls once, with preallocated buffers.

@@ -181,16 +181,37 @@ def test_wrong_number_of_inputs(fmu):
         plant.step([1.0])
 
 
-def test_error_status_mid_run_reports_time_and_function(fmu):
-    # negative damping makes the plant diverge; the FMU returns fmi2Error once a state passes 1e12
-    with FmuPlant(fmu, dt=DT, parameters={"Bm": -2e5}, start={"omega_m": 1.0}) as plant:
+@pytest.mark.parametrize("fmi_version", ["2.0", "3.0"])
+def test_error_status_mid_run_reports_time_and_function(fmi_version):
+    # negative damping makes the plant diverge; the FMU returns an error once a state passes 1e12
+    with FmuPlant(build_fmu(fmi_version=fmi_version), dt=DT, parameters={"Bm": -2e5},
+                  start={"omega_m": 1.0}) as plant:
         with pytest.raises(FmiCallError) as err:
             for _ in range(100_000):
                 plant.step([0.0, 0.0])
         exc = err.value
-        assert exc.function == "fmi2DoStep" and exc.status == 3
+        assert exc.function == f"fmi{fmi_version[0]}DoStep" and exc.status == 3
         assert 0 < exc.time < 100_000 * DT
+        assert exc.time == pytest.approx(plant.time, abs=1e-12)  # the failing step started where the plant is
         assert f"{exc.time:.9g}" in one_line(exc)
+        assert "diverg" in str(exc)  # the FMU's own log message is attached
+
+
+def test_instance_is_freed_and_files_removed_also_on_error(fmu):
+    with pytest.raises(FmiCallError):
+        with FmuPlant(fmu, dt=DT, parameters={"Bm": -2e5}, start={"omega_m": 1.0}) as plant:
+            unzipped = Path(plant._unzipdir)
+            assert unzipped.is_dir()
+            for _ in range(100_000):
+                plant.step([0.0, 0.0])
+    assert plant._fmu is None and not unzipped.exists()
+
+
+def test_fmi3_build_runs_through_the_same_api():
+    with FmuPlant(build_fmu(fmi_version="3.0"), dt=DT, start={"omega_L": 1.0}) as plant:
+        assert plant.fmi_version == "3.0" and plant.states == plant.outputs
+        y = plant.run(np.zeros((100, 2)))
+    assert y[-1, 2] > 0 and abs(plant.time - 100 * DT) < 1e-12
 
 
 @pytest.mark.parametrize("kwargs,match", [
