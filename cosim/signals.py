@@ -138,6 +138,11 @@ class Signal:
     kind: ClassVar[str] = "signal"
     __array_ufunc__ = None  # let ``np.float64(2) * sig`` fall back to Signal.__rmul__
 
+    def _coerce(self, **checks: Callable[[str, Any], Any]) -> None:
+        """Validate and normalise fields of this frozen dataclass: ``self._coerce(frequency=_positive)``."""
+        for name, check in checks.items():
+            object.__setattr__(self, name, check(name, getattr(self, name)))
+
     def __call__(self, t: np.ndarray | float) -> np.ndarray | float:
         times = np.asarray(t, dtype=float)
         out = np.asarray(self._evaluate(np.atleast_1d(times)), dtype=float).reshape(times.shape)
@@ -237,10 +242,7 @@ class SquareWave(Signal):
     phase: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "frequency", _positive("frequency", self.frequency))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
-        object.__setattr__(self, "phase", _number("phase", self.phase))
+        self._coerce(amplitude=_number, frequency=_positive, offset=_number, phase=_number)
         duty = _number("duty", self.duty)
         if not 0.0 < duty < 1.0:
             raise InvalidSettingError(f"duty must be strictly between 0 and 1, got {duty}; e.g. duty=0.5")
@@ -262,10 +264,7 @@ class SineWave(Signal):
     phase: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "frequency", _positive("frequency", self.frequency))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
-        object.__setattr__(self, "phase", _number("phase", self.phase))
+        self._coerce(amplitude=_number, frequency=_positive, offset=_number, phase=_number)
 
     def _evaluate(self, t: np.ndarray) -> np.ndarray:
         cycles = self.frequency * t
@@ -291,11 +290,9 @@ class Prbs(Signal):
     _bits: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "clock", _positive("clock", self.clock))
+        self._coerce(amplitude=_number, clock=_positive, offset=_number)
         object.__setattr__(self, "order", _integer("order", self.order, *_PRBS_ORDERS))
         object.__setattr__(self, "seed", _integer("seed", self.seed, 0))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
         state = np.random.default_rng(self.seed).integers(0, 2, self.order, dtype=np.int8)
         if not state.any():
             state[0] = 1  # the all-zero state would lock the register
@@ -341,9 +338,7 @@ class Chirp(Signal):
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "duration", _positive("duration", self.duration))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
+        self._coerce(amplitude=_number, duration=_positive, offset=_number)
         method = _choice("method", self.method, _CHIRP_METHODS)
         object.__setattr__(self, "method", method)
         check = _positive if method == "logarithmic" else _number
@@ -420,9 +415,7 @@ class Multisine(Signal):
     _harmonics: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "period", _positive("period", self.period))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
+        self._coerce(amplitude=_number, period=_positive, offset=_number)
         freqs = tuple(_positive("frequency", f) for f in self.frequencies)
         phases = tuple(_number("phase", p) for p in self.phases)
         if not freqs or len(freqs) != len(phases):
@@ -476,9 +469,7 @@ class Step(Signal):
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "amplitude", _number("amplitude", self.amplitude))
-        object.__setattr__(self, "at", _number("at", self.at))
-        object.__setattr__(self, "offset", _number("offset", self.offset))
+        self._coerce(amplitude=_number, at=_number, offset=_number)
 
     def _evaluate(self, t: np.ndarray) -> np.ndarray:
         edge = self.at - _EDGE_TOL * max(1.0, abs(self.at))
@@ -493,7 +484,7 @@ class Constant(Signal):
     value: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "value", _number("value", self.value))
+        self._coerce(value=_number)
 
     def _evaluate(self, t: np.ndarray) -> np.ndarray:
         return np.full(t.shape, self.value)
@@ -528,7 +519,7 @@ class ScaledSignal(Signal):
     signal: Signal
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "gain", _number("gain", self.gain))
+        self._coerce(gain=_number)
         if not isinstance(self.signal, Signal):
             raise InvalidSettingError(f"signal must be a Signal, got {type(self.signal).__name__}")
 
