@@ -22,13 +22,9 @@ from typing import Any
 from .build import build_fmu
 from .plots import plot_trajectory
 from .simulation import simulate
+from .study import STUDY_DT, STUDY_X0
 
-__all__ = ["run_demo", "STUDY_X0", "STUDY_DT"]
-
-#: The reference study's initial state [theta_m, omega_m, theta_L, omega_L] (here in rad and rad/s).
-STUDY_X0 = {"theta_m": -2.0, "omega_m": 0.0, "theta_L": 2.0, "omega_L": 1.0}
-#: The study's encoder sampling rate, 2257 Hz.
-STUDY_DT = 1 / 2257
+__all__ = ["run_demo"]
 
 
 def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: float = 100.0,
