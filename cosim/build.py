@@ -17,6 +17,9 @@ where ``<cache>`` is :func:`fmu_cache_dir` (``$COSIM_CACHE_DIR``, else
 ``<key>`` is the first 16 hex digits of a SHA-256 over the source files, the FMI
 version, the platform, the compiler's version line and the FMI headers.
 
+The compiler lookup, flags, compilation and packing are shared with the FMUs generated from
+identified models (:func:`cosim.export.export_fmu`) in the private module ``cosim._compile``.
+
 Writes are atomic: the FMU is compiled in a temporary directory, zipped into a
 temporary file next to its final place, then renamed into place. Two processes
 building at once both succeed, and a crash never leaves a half-written FMU.
@@ -42,15 +45,20 @@ import hashlib
 import os
 import pathlib
 import re
-import shlex
-import shutil
-import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
-from dataclasses import dataclass
 
+from cosim._compile import (
+    CFLAGS,
+    Platform,
+    compile_library,
+    compiler_version,
+    find_compiler,
+    platform_info,
+    write_zip_atomically,
+)
 from cosim.errors import BuildError, FmuNotFoundError, InvalidSettingError
 
 __all__ = ["build_fmu", "fmu_cache_dir", "fmu_source_dir"]
@@ -59,10 +67,7 @@ _DEFAULT_NAME = "two_mass_servo"
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _WRAPPERS = {2: "fmi2.c", 3: "fmi3.c"}
 _DESCRIPTIONS = {2: "modelDescription.xml", 3: "modelDescription3.xml"}
-_CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fvisibility=hidden", "-shared")
-_COMPILE_TIMEOUT_S = 300
 _BUILDER_FORMAT = "1"  # bump when the layout of the built FMU changes
-_ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: same inputs, same archive
 
 
 def fmu_cache_dir() -> pathlib.Path:
@@ -187,12 +192,12 @@ def build_fmu(
         if not needed.is_file():
             raise BuildError(f"{name} has no FMI {version} source: {needed.name} is missing from {src}")
     model_identifier = _model_identifier(description)
-    platform = _platform_info(version)
-    compiler = _find_compiler()
-    compiler_version = _compiler_version(compiler)
+    platform = platform_info(version)
+    compiler = find_compiler()
+    version_line = compiler_version(compiler)
 
     c_files = [p for p in _c_sources(src) if p.name not in _WRAPPERS.values()] + [wrapper]
-    key = _cache_key(src, version, platform, compiler, compiler_version)
+    key = _cache_key(src, version, platform, compiler, version_line)
     root = pathlib.Path(cache_dir).expanduser().absolute() if cache_dir is not None else fmu_cache_dir()
     target_dir = root / "fmus" / f"{name}-fmi{version}-{key}"
     target = target_dir / f"{name}.fmu"
@@ -201,7 +206,7 @@ def build_fmu(
 
     with tempfile.TemporaryDirectory(prefix="cosim-build-") as tmp:
         library = pathlib.Path(tmp) / (model_identifier + platform.extension)
-        _compile(compiler, c_files, src, platform, library, name, version)
+        compile_library(compiler, c_files, [src], platform, library, what=f"{name} (FMI {version})")
         target_dir.mkdir(parents=True, exist_ok=True)
         _write_fmu_atomically(target, description, library, platform, src, c_files, version, model_identifier)
     return target
@@ -209,14 +214,6 @@ def build_fmu(
 
 # --------------------------------------------------------------------------------------
 # helpers
-
-
-@dataclass(frozen=True)
-class _Platform:
-    folder: str  # binaries/<folder>/
-    extension: str  # .so, .dylib, .dll
-    headers: pathlib.Path  # fmpy's c-code folder with the FMI headers
-    header_files: tuple[pathlib.Path, ...]  # the headers of this FMI version
 
 
 def _check_name(name: str) -> None:
@@ -323,59 +320,8 @@ def _model_identifier(description: pathlib.Path) -> str:
     return identifier
 
 
-def _platform_info(version: int) -> _Platform:
-    import fmpy
-
-    headers = pathlib.Path(fmpy.__file__).resolve().parent / "c-code"
-    names = (
-        ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-        if version == 2
-        else ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
-    )
-    header_files = tuple(headers / n for n in names)
-    missing = [p.name for p in header_files if not p.is_file()]
-    if missing:
-        raise BuildError(
-            f"FMI {version} headers {', '.join(missing)} not found in {headers}: "
-            "reinstall fmpy (pip install fmpy)"
-        )
-    folder = fmpy.platform if version == 2 else fmpy.platform_tuple
-    return _Platform(
-        folder=folder, extension=fmpy.sharedLibraryExtension, headers=headers, header_files=header_files
-    )
-
-
-def _find_compiler() -> list[str]:
-    candidates: list[list[str]] = []
-    cc = os.environ.get("CC", "").strip()
-    if cc:
-        try:
-            words = shlex.split(cc)
-        except ValueError:
-            words = [cc]
-        if words:
-            candidates.append(words)
-    candidates += [["cc"], ["gcc"]]
-    for words in candidates:
-        exe = shutil.which(words[0])
-        if exe:
-            return [exe, *words[1:]]
-    raise BuildError("no C compiler found: install gcc or set CC")
-
-
-def _compiler_version(compiler: list[str]) -> str:
-    try:
-        out = subprocess.run(
-            [*compiler, "--version"], capture_output=True, text=True, timeout=60, check=False
-        )
-    except (OSError, subprocess.SubprocessError) as exc:
-        raise BuildError(f"cannot run the C compiler {compiler[0]}: {exc}; install gcc or set CC") from None
-    lines = (out.stdout or out.stderr).strip().splitlines()
-    return lines[0] if lines else "unknown"
-
-
 def _cache_key(
-    src: pathlib.Path, version: int, platform: _Platform, compiler: list[str], compiler_version: str
+    src: pathlib.Path, version: int, platform: Platform, compiler: list[str], compiler_version: str
 ) -> str:
     digest = hashlib.sha256()
 
@@ -389,77 +335,26 @@ def _cache_key(
     add("fmi", str(version).encode())
     add("platform", f"{platform.folder} {platform.extension} {sys.platform}".encode())
     add("compiler", " ".join([pathlib.Path(compiler[0]).name, *compiler[1:], compiler_version]).encode())
-    add("flags", " ".join(_CFLAGS).encode())
+    add("flags", " ".join(CFLAGS).encode())
     add("builder", _BUILDER_FORMAT.encode())
     return digest.hexdigest()[:16]
-
-
-def _compile(
-    compiler: list[str],
-    c_files: list[pathlib.Path],
-    src: pathlib.Path,
-    platform: _Platform,
-    library: pathlib.Path,
-    name: str,
-    version: int,
-) -> None:
-    windows = sys.platform.startswith("win") or sys.platform == "cygwin"
-    cmd = [*compiler, *_CFLAGS]
-    if not windows:
-        cmd.append("-fPIC")
-    cmd += ["-I", str(platform.headers), "-I", str(src), *map(str, c_files), "-o", str(library)]
-    if not windows:
-        cmd.append("-lm")
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=_COMPILE_TIMEOUT_S, check=False)
-    except subprocess.TimeoutExpired:
-        raise BuildError(
-            f"compiling {name} (FMI {version}) with {compiler[0]} took longer than {_COMPILE_TIMEOUT_S} s"
-        ) from None
-    except OSError as exc:
-        raise BuildError(f"cannot run the C compiler {compiler[0]}: {exc}; install gcc or set CC") from None
-    if proc.returncode != 0 or not library.is_file():
-        output = (proc.stderr or "") + (proc.stdout or "")
-        lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
-        errors = [ln for ln in lines if "error" in ln.lower()] or lines
-        detail = " | ".join(errors[:3]) or f"exit status {proc.returncode}"
-        raise BuildError(f"compiling {name} (FMI {version}) with {compiler[0]} failed: {detail}")
 
 
 def _write_fmu_atomically(
     target: pathlib.Path,
     description: pathlib.Path,
     library: pathlib.Path,
-    platform: _Platform,
+    platform: Platform,
     src: pathlib.Path,
     c_files: list[pathlib.Path],
     version: int,
     model_identifier: str,
 ) -> None:
-    members: list[tuple[str, pathlib.Path, int]] = [
-        ("modelDescription.xml", description, 0o644),
-        (f"binaries/{platform.folder}/{library.name}", library, 0o755),
+    members: list[tuple[str, bytes, int]] = [
+        ("modelDescription.xml", description.read_bytes(), 0o644),
+        (f"binaries/{platform.folder}/{library.name}", library.read_bytes(), 0o755),
     ]
-    members += [(f"sources/{p.name}", p, 0o644) for p in (*c_files, *_headers(src))]
-    fd, tmp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.stem}-", suffix=".fmu.tmp")
-    tmp = pathlib.Path(tmp_name)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-                for arcname, path, mode in members:
-                    info = zipfile.ZipInfo(arcname, date_time=_ZIP_DATE)
-                    info.compress_type = zipfile.ZIP_DEFLATED
-                    info.external_attr = (0o100000 | mode) << 16
-                    zf.writestr(info, path.read_bytes())
-                if version == 3:
-                    info = zipfile.ZipInfo("sources/buildDescription.xml", date_time=_ZIP_DATE)
-                    info.compress_type = zipfile.ZIP_DEFLATED
-                    info.external_attr = (0o100000 | 0o644) << 16
-                    zf.writestr(info, _build_description(model_identifier, c_files))
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp made it private; the cache may be shared (COSIM_CACHE_DIR)
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    members += [(f"sources/{p.name}", p.read_bytes(), 0o644) for p in (*c_files, *_headers(src))]
+    if version == 3:
+        members.append(("sources/buildDescription.xml", _build_description(model_identifier, c_files).encode(), 0o644))
+    write_zip_atomically(target, members)

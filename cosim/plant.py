@@ -27,10 +27,12 @@ from __future__ import annotations
 import collections
 import ctypes
 import difflib
+import itertools
 import logging
 import math
 import os
 import shutil
+import weakref
 import zipfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -115,6 +117,36 @@ def open_model_description(fmu: str | os.PathLike) -> ModelDescription:
         raise FmuPlatformError(f"{path} has no binary for this platform ({platform}; it has: {has}); "
                                "export it for this platform")
     return md
+
+
+# FMPy's C logger proxy keeps ONE process-wide pointer to the Python logger it forwards to. A logger per plant
+# would leave that pointer dangling once the plant is gone (and route every FMU's messages to the last plant).
+# So there is one logger for the process, never freed, which finds the plant by the componentEnvironment
+# pointer it was instantiated with, and falls back to FMPy's own printer for FMUs that are not ours.
+_PLANTS: weakref.WeakValueDictionary[int, FmuPlant] = weakref.WeakValueDictionary()
+_NEXT_ID = itertools.count(1)
+_LOGGER: list[Any] = []
+
+
+def _register(plant: FmuPlant) -> int:
+    key = next(_NEXT_ID)
+    _PLANTS[key] = plant
+    return key
+
+
+def _fmi2_logger() -> Any:
+    if not _LOGGER:
+        from fmpy.fmi1 import printLogMessage
+
+        def dispatch(env, instance, status, category, message):
+            plant = _PLANTS.get(env) if env else None
+            if plant is not None:
+                plant._on_log(status, category, message)
+            else:
+                printLogMessage(env, instance, status, category, message)
+
+        _LOGGER.append(fmpy.fmi2.fmi2CallbackLoggerTYPE(dispatch))
+    return _LOGGER[0]
 
 
 def _close_matches(name: str, candidates: Iterable[str]) -> str:
@@ -325,15 +357,11 @@ class FmuPlant:
         fmu = self._fmu
         try:
             if self.fmi_version == "2.0":
-                from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-
-                def logger(env, instance, status, category, message):
-                    self._on_log(status, category, message)
-
-                callbacks = fmi2CallbackFunctions()
-                callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+                callbacks = fmpy.fmi2.fmi2CallbackFunctions()
+                callbacks.logger = _fmi2_logger()
                 callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
                 callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
+                callbacks.componentEnvironment = _register(self)
                 try:  # FMPy's C proxy formats printf-style arguments of the message
                     from fmpy.logging import addLoggerProxy
                     addLoggerProxy(ctypes.byref(callbacks))
