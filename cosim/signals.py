@@ -27,7 +27,6 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import signal as _sps
 from scipy.optimize import minimize_scalar
 
 from .errors import InvalidSettingError, SignalSpecError
@@ -296,7 +295,9 @@ class Prbs(Signal):
         state = np.random.default_rng(self.seed).integers(0, 2, self.order, dtype=np.int8)
         if not state.any():
             state[0] = 1  # the all-zero state would lock the register
-        sequence, _ = _sps.max_len_seq(self.order, state=state)
+        from scipy.signal import max_len_seq  # scipy.signal costs 0.7 s to import: only when used
+
+        sequence, _ = max_len_seq(self.order, state=state)
         object.__setattr__(self, "_bits", _readonly((2 * sequence.astype(np.int8) - 1).astype(np.int8)))
 
     @property
@@ -360,7 +361,9 @@ class Chirp(Signal):
     def _evaluate(self, t: np.ndarray) -> np.ndarray:
         inside = (t >= 0.0) & (t < self.duration)
         t_in = np.where(inside, t, 0.0)
-        sweep = _sps.chirp(t_in, self.f0, self.duration, self.f1, method=self.method, phi=-90)
+        from scipy.signal import chirp as _chirp  # see Prbs: imported when used
+
+        sweep = _chirp(t_in, self.f0, self.duration, self.f1, method=self.method, phi=-90)
         return self.offset + np.where(inside, self.amplitude * sweep, 0.0)
 
 
