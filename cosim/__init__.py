@@ -1,7 +1,12 @@
 """cosim: identify, diagnose and control real machines, with the plant as an FMU.
 
 Pipeline stages, one module each: ``build`` (FMUs from C source), ``plant`` (:class:`FmuPlant`),
-``signals`` (excitations), ``trajectory`` (:class:`Trajectory`), ``simulation`` (:func:`simulate`).
+``signals`` (excitations), ``trajectory`` (:class:`Trajectory`), ``simulation`` (:func:`simulate`),
+``identification`` (:class:`SINDYc`), ``model`` (:class:`IdentifiedModel`), ``metrics``, ``export``
+(python-control, MATLAB, FMI), ``sweep`` (:func:`run_sweep`), ``reproduce`` (the reference study), ``report``.
+
+The heavier stages (identification, export, sweep) are imported on first use, so that ``import cosim`` stays
+quick for worker processes.
 """
 
 import logging
@@ -26,6 +31,27 @@ from .trajectory import Trajectory
 
 __version__ = "0.1.0"
 
+_LAZY = {
+    "SINDYc": "identification",
+    "IdentifiedModel": "model",
+    "SimulationResult": "model",
+    "to_statespace": "export",
+    "export": "export",
+    "run_sweep": "sweep",
+    "SweepResult": "sweep",
+    "reproduce_paper": "reproduce",
+}
+
+
+def __getattr__(name: str):
+    """Import the heavier stages on first use (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+
+        module = importlib.import_module(f".{_LAZY[name]}", __name__)
+        return getattr(module, name)
+    raise AttributeError(f"module 'cosim' has no attribute {name!r}")
+
 # A library logs, the application decides where to: FMUs' messages go to logger "cosim.fmu".
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
@@ -47,4 +73,5 @@ __all__ = [
     "open_model_description",
     "signals",
     "simulate",
+    *_LAZY,
 ]
