@@ -104,3 +104,35 @@ def test_data_info_missing_columns_and_good_file(tmp_path):
     info = json.loads(run("data", "info", str(out), "--json").stdout)
     assert info["samples"] == 101 and info["uniform"] is True
     assert {s["name"]: s["role"] for s in info["signals"]}["theta_L"] == "state"
+
+
+@pytest.fixture()
+def model_file(tmp_path):
+    from cosim.model import IdentifiedModel
+    from cosim.study import INPUTS, STATES, two_mass_matrices
+
+    a, b = two_mass_matrices()
+    model = IdentifiedModel(states=STATES, inputs=INPUTS, terms=STATES + INPUTS, coef=np.hstack([a, b]), dt=1e-3)
+    return model.save(tmp_path / "model.json")
+
+
+def test_export_writes_mat_and_fmu(model_file, tmp_path):
+    from scipy.io import loadmat
+
+    result = run("export", str(model_file), "--to", str(tmp_path / "ss.mat"), "--to", str(tmp_path / "m.fmu"),
+                 "--json")
+    assert result.exit_code == 0, result.stderr
+    written = json.loads(result.stdout)["written"]
+    assert [w.rsplit(".", 1)[1] for w in written] == ["mat", "fmu"]
+    mat = loadmat(tmp_path / "ss.mat")
+    assert mat["A"][1, 0] == pytest.approx(-1e4) and mat["B"].shape == (4, 2)
+    info = json.loads(run("fmu", "info", str(tmp_path / "m.fmu"), "--json").stdout)
+    assert info["states"] == ["theta_m", "omega_m", "theta_L", "omega_L"]
+
+
+def test_export_bad_input(model_file, tmp_path):
+    assert_clean_error(run("export", str(model_file), "--to", str(tmp_path / "m.xyz")), ".xyz")
+    assert_clean_error(run("export", str(tmp_path / "none.json"), "--to", str(tmp_path / "m.mat")), "not found")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert_clean_error(run("export", str(bad), "--to", str(tmp_path / "m.mat")), "not a cosim model")
