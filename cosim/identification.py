@@ -761,15 +761,16 @@ class SINDYc:
 
     def _prune(self, model: IdentifiedModel, runs, dt: float, fit, support: np.ndarray,
                known_x0: list[np.ndarray] | None, coef_scale: np.ndarray, meta: dict[str, Any]):
-        """threshold="auto" with refinement: backward elimination on the output-error fit (Wald tests).
+        """threshold="auto" with refinement: backward elimination on the output-error fit (Wald tests, BIC).
 
         The least significant refined coefficient (smallest ``t = |coef| / standard error``, from the
         covariance of the output-error fit) is removed while ``t < sqrt(log(n))`` (``n`` the number of
-        residuals: then removing it lowers the output error's BIC, to second order). One at a time, and after
-        each removal the others and their covariance are updated as the constrained least-squares solution
+        residuals: removing it lowers the output error's BIC, to second order). One at a time, the others and
+        their covariance updated after each removal as the constrained least-squares solution
         (``theta -= C[:, j] theta_j / C[j, j]``, ``C -= C[:, j] C[j, :] / C[j, j]``), because collinear terms
-        are each insignificant while jointly needed. The reduced model is then refined again, and the
-        elimination repeats on the new fit until nothing is removed (at most three rounds).
+        are each insignificant while jointly needed. The reduced model is refined again and kept if the
+        output error's BIC ``n*log(cost) + k*log(n)`` went down; otherwise only the single least significant
+        coefficient is tried. Rounds repeat on the new fit until nothing is removed.
         """
         from .output_error import refine_output_error
 
@@ -778,14 +779,18 @@ class SINDYc:
         removed: list[dict[str, Any]] = []
         runs_oe = [(x, u[:-1]) for x, u in runs]
         seconds = fit.seconds
-        for _ in range(3):
+
+        def bic(f, sup: np.ndarray) -> float:
+            return n_obs * math.log(max(f.cost, 1e-300)) + float(sup.sum()) * math.log(n_obs)
+
+        for _ in range(int(support.sum())):
             if fit.covariance is None:
                 break
             index = [tuple(ij) for ij in np.argwhere(support)]
             theta = np.array([fit.coef[ij] for ij in index])
             cov = np.array(fit.covariance, dtype=float)
             alive = list(range(len(index)))
-            dropped_now = []
+            proposal: list[tuple[int, float, np.ndarray]] = []  # (index, t, theta after removing it)
             while len(alive) > 1:
                 var = np.array([cov[j, j] for j in alive])
                 with np.errstate(divide="ignore", invalid="ignore"):
@@ -797,28 +802,41 @@ class SINDYc:
                 theta = theta - cov[:, j] * theta[j] / cov[j, j]
                 cov = cov - np.outer(cov[:, j], cov[j, :]) / cov[j, j]
                 theta[j] = 0.0
-                dropped_now.append(j)
-                i, k = index[j]
-                removed.append({"state": model.states[i], "term": model.terms[k], "t": float(t[pos])})
-            if not dropped_now:
+                proposal.append((j, float(t[pos]), theta.copy()))
+            if not proposal:
                 break
-            coef = fit.coef.copy()
-            new_support = support.copy()
-            for j, ij in enumerate(index):
-                coef[ij] = theta[j]
-            for j in dropped_now:
-                new_support[index[j]] = False
-                coef[index[j]] = 0.0
-            start = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=dt)
-            trial = refine_output_error(start, runs_oe, dt=dt, support=new_support,
-                                        estimate_x0=self.refine_initial_state and known_x0 is None,
-                                        x0=known_x0 if known_x0 is not None else fit.x0, coef_scale=coef_scale,
-                                        continuation=False, max_nfev=int(self.refine_options.get("max_nfev", 60)))
-            seconds += trial.seconds
-            fit, support = trial, new_support
+            accepted = None
+            for step in (proposal, proposal[:1]):  # all Wald removals; failing that, the least significant one
+                coef = fit.coef.copy()
+                new_support = support.copy()
+                for j, ij in enumerate(index):
+                    coef[ij] = step[-1][2][j] if len(step) == len(proposal) else fit.coef[ij]
+                for j, _, _ in step:
+                    new_support[index[j]] = False
+                    coef[index[j]] = 0.0
+                start = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef,
+                                        dt=dt)
+                trial = refine_output_error(start, runs_oe, dt=dt, support=new_support,
+                                            estimate_x0=self.refine_initial_state and known_x0 is None,
+                                            x0=known_x0 if known_x0 is not None else fit.x0,
+                                            coef_scale=coef_scale, continuation=False,
+                                            max_nfev=int(self.refine_options.get("max_nfev", 60)))
+                seconds += trial.seconds
+                if trial.status == "ok" and bic(trial, new_support) <= bic(fit, support):
+                    accepted = (trial, new_support, step)
+                    break
+                if len(proposal) == 1:
+                    break
+            if accepted is None:
+                break
+            fit, support, step = accepted
+            for j, t_value, _ in step:
+                i, k = index[j]
+                removed.append({"state": model.states[i], "term": model.terms[k], "t": t_value})
         meta["threshold"] = {"method": "auto with refinement: dense equation-error fit, refined by output error, "
                                        "then backward elimination (Wald) of coefficients with |coef|/std_error "
-                                       "below sqrt(log(n)), n the number of residuals (BIC of the output error)",
+                                       "below sqrt(log(n)), n the number of residuals, kept when the output "
+                                       "error's BIC drops",
                              "value": limit, "residuals": n_obs, "removed": removed,
                              "equation_error": meta["threshold"]}
         object.__setattr__(fit, "seconds", seconds)

@@ -299,6 +299,26 @@ def test_output_error_refinement_removes_the_noise_bias(clean):
     assert refined.model_.meta["refinement"]["cost"] < refined.model_.meta["refinement"]["cost_start"]
 
 
+def test_output_error_refinement_of_a_nonlinear_model():
+    """A polynomial (state-input cross term) model is refined with RK4 simulations and finite differences."""
+    model = IdentifiedModel(states=("x",), inputs=("u",), terms=("x", "x*u", "u"), coef=np.array([[-1.0, 0.5, 1.0]]))
+    t = np.arange(600) * 0.02
+    u = (np.sin(0.7 * t) + 0.5 * np.sign(np.sin(2.3 * t)))[:, None]
+    clean_run = model.simulate([0.5], u, dt=0.02).to_trajectory()
+    noisy = clean_run.with_noise(0.3, seed=1)
+    common = {"library": "polynomial", "degree": 2, "threshold": 0.0, "include_constant": False}
+    plain = SINDYc(**common).fit(noisy)
+    refined = SINDYc(refine="output_error", **common).fit(noisy)
+    meta = refined.model_.meta["refinement"]
+    assert meta["status"] == "ok" and meta["cost"] < meta["cost_start"]
+    from cosim.metrics import max_deviation_pct
+
+    steps = clean_run[["u"]][:-1]
+    dev_refined = max_deviation_pct(clean_run["x"], refined.simulate(refined.model_.meta["x0"][0], steps).states[:, 0])
+    dev_plain = max_deviation_pct(clean_run["x"], plain.simulate([noisy["x"][0]], steps).states[:, 0])
+    assert dev_refined < dev_plain
+
+
 def test_known_initial_state_is_kept_fixed(clean):
     noisy = clean["sine"].with_noise(0.1, seed=1)
     est = SINDYc(include_constant=False, threshold=0.0, kinematics=KINEMATICS, refine="output_error").fit(
@@ -346,7 +366,8 @@ def test_beats_the_study_table(noise):
     worst = {s: 0.0 for s in STATES}
     r2_min = 1.0
     for excitation in EXCITATIONS:
-        runs = [study_case(excitation, noise, seed, duration=5.0) for seed in (1, 2)]
+        seeds = (1, 2) if noise > 0 else (1,)  # without noise the seed changes nothing
+        runs = [study_case(excitation, noise, seed, duration=5.0) for seed in seeds]
         for s in STATES:
             worst[s] = max(worst[s], float(np.mean([r["max_dev_pct"][s] for r in runs])))
         r2_min = min(r2_min, min(min(r["r2"].values()) for r in runs))
