@@ -15,6 +15,7 @@ from . import signals
 from .build import build_fmu, fmu_cache_dir
 from .errors import (
     BuildError,
+    ControllerError,
     CosimError,
     DataError,
     FmiCallError,
@@ -23,6 +24,7 @@ from .errors import (
     FmuPlatformError,
     InvalidSettingError,
     SignalSpecError,
+    SpecError,
     UnknownVariableError,
 )
 from .plant import FmuPlant, open_model_description
@@ -57,6 +59,7 @@ logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __all__ = [
     "BuildError",
+    "ControllerError",
     "CosimError",
     "DataError",
     "FmiCallError",
@@ -66,6 +69,7 @@ __all__ = [
     "FmuPlatformError",
     "InvalidSettingError",
     "SignalSpecError",
+    "SpecError",
     "Trajectory",
     "UnknownVariableError",
     "build_fmu",

@@ -18,6 +18,8 @@ __all__ = [
     "DataError",
     "SignalSpecError",
     "BuildError",
+    "ControllerError",
+    "SpecError",
 ]
 
 
@@ -78,3 +80,11 @@ class SignalSpecError(CosimError, ValueError):
 
 class BuildError(CosimError, RuntimeError):
     """Building an FMU from C source failed (no compiler, or the compiler reported errors)."""
+
+
+class ControllerError(CosimError, RuntimeError):
+    """A controller cannot be designed as asked, or failed while running (its message says when and why)."""
+
+
+class SpecError(CosimError, ValueError):
+    """A closed-loop scenario or specification such as ``settling_time<=0.5`` is malformed."""
