@@ -36,7 +36,7 @@ from .files import atomic_output
 __all__ = ["Trajectory", "ROLES"]
 
 #: The roles a signal can have.
-ROLES = ("state", "input", "output")
+ROLES = ("state", "input", "output", "reference")
 
 _TIME = "time"
 _FORMAT = "cosim-trajectory"
