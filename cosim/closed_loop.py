@@ -271,7 +271,7 @@ def _run(controller: Any, plant: Any, *, n: int, t0: float, dt: float, refs: np.
     step, perf = plant.step, time.perf_counter_ns
     hold = on_controller_error == "hold"
     last_u = U[0, ctrl_idx].copy()
-    k = 0
+    k = held = 0
     disable = (None if n >= _PROGRESS_MIN_STEPS else True) if progress is None else not progress
     bar = tqdm(total=n, unit="step", desc=desc, disable=disable, leave=False)
     try:
@@ -299,8 +299,13 @@ def _run(controller: Any, plant: Any, *, n: int, t0: float, dt: float, refs: np.
                                   "message": f"the controller raised {kind} at t={t:.6g} s: {exc}; the loop stopped"})
                     break
                 row[ctrl_idx] = last_u
-                stops.append({"time": t, "kind": "controller_error",
-                              "message": f"the controller raised {kind} at t={t:.6g} s: {exc}; input held"})
+                held += 1
+                if held == 1:
+                    stops.append({"time": t, "kind": "controller_error",
+                                  "message": f"the controller raised {kind} at t={t:.6g} s: {exc}; input held"})
+                else:
+                    first = stops[-1]["message"].split("; input held")[0]
+                    stops[-1]["message"] = f"{first}; input held ({held} calls failed, the last at t={t:.6g} s)"
             last_u = row[ctrl_idx]
             try:
                 Y[k + 1] = step(row)

@@ -1,0 +1,158 @@
+"""The closed loop against the real bundled FMU: results, the model run, timing, and what happens on failure."""
+
+import time
+
+import control
+import numpy as np
+import pytest
+
+from controllers.base import Controller, DesignModel
+from cosim import build_fmu
+from cosim.closed_loop import ModelPlant, closed_loop
+from cosim.errors import InvalidSettingError, UnknownVariableError
+from cosim.plant import FmuPlant
+from cosim.study import STATES, two_mass_matrices
+
+DT = 1 / 2257
+
+
+def true_model() -> control.StateSpace:
+    a, b = two_mass_matrices()
+    return control.ss(a, b, np.eye(4), 0, states=list(STATES), inputs=["Tm", "TL"], outputs=list(STATES))
+
+
+class StateFeedback(Controller):
+    """LQR on the full measured state with a reference pre-filter: a real, simple controller for the loop tests."""
+
+    kind = "test-state-feedback"
+
+    def __init__(self, *, fail_at: float | None = None, nan_at: float | None = None, slow_every: int = 0,
+                 overshoot_limits: bool = False) -> None:
+        super().__init__(dt=DT, inputs=["Tm"], outputs=list(STATES), tracked=["theta_L"], u_min=-5000, u_max=5000)
+        self.design_model = DesignModel.from_statespace(true_model(), dt=DT)
+        a, b = self.design_model.A, self.design_model.B[:, :1]
+        self.k, _, _ = control.dlqr(a, b, np.diag([1e6, 1.0, 1e8, 10.0]), np.array([[1e-2]]))
+        self.fail_at, self.nan_at, self.slow_every, self.loose = fail_at, nan_at, slow_every, overshoot_limits
+        self.reset()
+
+    def reset(self) -> None:
+        self.calls = 0
+        self.events.clear()
+
+    def __call__(self, t, y):
+        self.calls += 1
+        if self.fail_at is not None and t >= self.fail_at:
+            raise RuntimeError("solver exploded")
+        if self.nan_at is not None and t >= self.nan_at:
+            return np.array([np.nan])
+        if self.slow_every and self.calls % self.slow_every == 0:
+            time.sleep(1.5 * self.dt)
+        r = self.setpoint[0]
+        x_ref = np.array([r, 0.0, r, 0.0])
+        u = -(self.k @ (np.asarray(y) - x_ref))
+        return u if self.loose else np.clip(u, self.u_min, self.u_max)
+
+    def _settings(self):
+        return {}
+
+
+@pytest.fixture(scope="module")
+def fmu():
+    return build_fmu()
+
+
+def test_tracks_a_step_and_matches_the_design_model(fmu):
+    res = closed_loop(StateFeedback(), fmu, duration=1.5, reference=lambda t: 0.01 * (t >= 0.1))
+    assert res.status == "completed" and not res.events
+    assert len(res.fmu) == round(1.5 / DT) + 1 and res.model is not None
+    assert res.fmu["theta_L"][-1] == pytest.approx(0.01, rel=1e-3)
+    assert res.metrics["settling_time"] < 1.0
+    # the FMU (RK4, 10 substeps) and the exact ZOH model run the same closed loop: they agree to ~1e-7
+    assert res.metrics["model_discrepancy_pct"] < 1e-4
+    assert res.metrics["constraint_violations"] == 0
+    assert res.metrics["realtime_factor"] > 1.0
+    assert np.all(res.compute_time > 0)
+    summary = res.to_dict()
+    assert summary["status"] == "completed" and summary["solve_time_us"]["p99"] > 0
+
+
+def test_disturbance_and_effect_reach_the_fmu_only_where_asked(fmu):
+    res = closed_loop(StateFeedback(), fmu, duration=1.0, reference=0.0,
+                      disturbance={"TL": lambda t: 800.0 * (t >= 0.5)}, parameters={"Fc": 50.0})
+    tl = res.fmu["TL"]
+    assert np.all(tl[res.fmu.time < 0.5 - 1e-9] == 0) and np.all(tl[res.fmu.time >= 0.5] == 800.0)
+    assert res.metrics["peak_error"] > 1e-6  # the load torque moved the load
+    # the design model has TL as an input: it saw the same disturbance, but no friction
+    assert res.model["TL"][-1] == 800.0
+
+
+def test_controller_that_raises_stops_the_loop_and_keeps_the_trajectory(fmu):
+    res = closed_loop(StateFeedback(fail_at=0.25), fmu, duration=1.0, reference=0.01, model=None)
+    assert res.status == "stopped"
+    assert res.stopped_at == pytest.approx(0.25, abs=DT)
+    assert len(res.fmu) == round(0.25 / DT) + 1 or abs(res.fmu.time[-1] - 0.25) <= DT
+    event = res.events[-1]
+    assert event["kind"] == "controller_error" and "solver exploded" in event["message"]
+    assert event["time"] == pytest.approx(0.25, abs=DT)
+    held = closed_loop(StateFeedback(fail_at=0.25), fmu, duration=0.5, reference=0.01, model=None,
+                       on_controller_error="hold")
+    failing = np.count_nonzero(held.fmu.time[:-1] >= 0.25)
+    assert held.status == "completed" and len(held.events) == 1
+    assert f"{failing} calls failed" in held.events[0]["message"]
+    assert np.all(held.fmu["Tm"][held.fmu.time >= 0.25] == held.fmu["Tm"][-failing - 2])  # the last good input
+
+
+def test_non_finite_controller_output_stops_before_reaching_the_plant(fmu):
+    res = closed_loop(StateFeedback(nan_at=0.1), fmu, duration=0.5, reference=0.01, model=None)
+    assert res.status == "stopped" and "non-finite" in res.events[-1]["message"]
+    assert np.all(np.isfinite(res.fmu["theta_L"]))
+
+
+def test_plant_failure_mid_run_is_reported_with_its_time(fmu):
+    res = closed_loop(StateFeedback(), fmu, duration=5.0, reference=0.0, parameters={"Bm": -2e5},
+                      start={"omega_m": 1.0}, model=None)
+    assert res.status == "stopped"
+    assert res.events[-1]["kind"] == "plant_error" and "diverged" in res.events[-1]["message"]
+    assert 0 < res.stopped_at < 5.0
+    assert np.all(np.isfinite(res.fmu["theta_m"]))
+
+
+def test_deadline_misses_are_counted(fmu):
+    res = closed_loop(StateFeedback(slow_every=50), fmu, duration=0.2, reference=0.0, model=None)
+    n = round(0.2 / DT)
+    assert res.metrics["deadline_misses"] >= n // 50
+    assert res.metrics["deadline_miss_rate"] == pytest.approx(res.metrics["deadline_misses"] / n)
+
+
+def test_input_limit_violations_are_counted(fmu):
+    res = closed_loop(StateFeedback(overshoot_limits=True), fmu, duration=0.3, reference=0.05, model=None)
+    over = np.count_nonzero(np.abs(res.fmu["Tm"][:-1]) > 5000)
+    assert over > 0 and res.metrics["constraint_violations"] == over
+
+
+def test_open_plant_must_step_at_the_controller_rate(fmu):
+    with FmuPlant(fmu, dt=1e-3) as plant, pytest.raises(InvalidSettingError, match="controller's dt"):
+        closed_loop(StateFeedback(), plant, duration=0.1)
+    with FmuPlant(fmu, dt=DT) as plant:  # an open plant is reset and can be reused
+        first = closed_loop(StateFeedback(), plant, duration=0.2, reference=0.01, model=None)
+        again = closed_loop(StateFeedback(), plant, duration=0.2, reference=0.01, model=None)
+    np.testing.assert_array_equal(first.fmu["theta_L"], again.fmu["theta_L"])
+
+
+def test_bad_names_and_signals_are_refused(fmu):
+    with pytest.raises(UnknownVariableError, match="disturbance on 'Tx'"):
+        closed_loop(StateFeedback(), fmu, duration=0.1, disturbance={"Tx": 1.0})
+    with pytest.raises(InvalidSettingError, match="driven by the controller"):
+        closed_loop(StateFeedback(), fmu, duration=0.1, disturbance={"Tm": 1.0})
+    with pytest.raises(InvalidSettingError, match="samples"):
+        closed_loop(StateFeedback(), fmu, duration=0.1, reference=np.zeros(7))
+    with pytest.raises(InvalidSettingError, match="duration"):
+        closed_loop(StateFeedback(), fmu, duration=-1)
+
+
+def test_model_plant_steps_like_the_discrete_model():
+    model = DesignModel.from_statespace(true_model(), dt=DT)
+    plant = ModelPlant(model, dt=DT, inputs=["Tm", "TL"], outputs=list(STATES), x0={"theta_L": 0.1})
+    y = plant.step([100.0, 0.0])
+    x0 = np.array([0.0, 0.0, 0.1, 0.0])
+    np.testing.assert_allclose(y, model.A @ x0 + model.B @ [100.0, 0.0], rtol=1e-12)
