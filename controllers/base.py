@@ -262,6 +262,9 @@ class Controller(ABC):
         Largest change of each input per sample (``inf`` when none).
     events : list of ControllerEvent
         What happened since the last :meth:`reset` (fallbacks, infeasible problems).
+    design_model : DesignModel or None
+        The model it was designed on, saved with it; :func:`cosim.closed_loop.closed_loop` also runs the
+        controller against it.
     info : dict
         Design figures (margins, weights, solver...), saved with the controller.
     """
@@ -296,6 +299,8 @@ class Controller(ABC):
             raise InvalidSettingError(f"du_max must be positive, got {self.du_max.tolist()}")
         self.info: dict[str, Any] = dict(info or {})
         self.events: list[ControllerEvent] = []
+        #: The model the controller was designed on (saved with it); the closed loop also runs against it.
+        self.design_model: DesignModel | None = None
         self._setpoint = np.zeros(len(self.tracked))
 
     # ------------------------------------------------------------------ the calling convention
@@ -336,8 +341,13 @@ class Controller(ABC):
 
     def to_dict(self) -> dict[str, Any]:
         """The controller as a JSON-compatible dictionary (``kind``, ``settings``, ``info``)."""
-        return {"format": CONTROLLER_FORMAT, "version": CONTROLLER_VERSION, "kind": self.kind,
+        cls = type(self)
+        data = {"format": CONTROLLER_FORMAT, "version": CONTROLLER_VERSION, "kind": self.kind,
+                "class": f"{cls.__module__}:{cls.__qualname__}",
                 "settings": _jsonable(self._settings()), "info": _jsonable(self.info)}
+        if self.design_model is not None:
+            data["design_model"] = self.design_model.to_dict()
+        return data
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=1, allow_nan=True)
@@ -384,16 +394,36 @@ def controller_from_json(data: str | Mapping[str, Any]) -> Controller:
                         f"({CONTROLLER_VERSION}); upgrade cosim")
     _import_builtin_kinds()
     kind = data.get("kind")
-    if kind not in _REGISTRY:
-        raise DataError(f"unknown controller kind {kind!r}; known kinds: {sorted(_REGISTRY)}")
+    cls = _REGISTRY.get(kind) or _class_named(data.get("class"))
+    if cls is None:
+        raise DataError(f"unknown controller kind {kind!r}; known kinds: {sorted(_REGISTRY)} (a user-defined "
+                        "controller must be importable where it is loaded)")
     settings = dict(data.get("settings") or {})
     settings = {k: _unjson(v) for k, v in settings.items()}
     try:
-        controller = _REGISTRY[kind](**settings)
+        controller = cls(**settings)
     except TypeError as exc:
         raise DataError(f"controller file does not fit kind {kind!r}: {exc}") from None
     controller.info.update(data.get("info") or {})
+    if data.get("design_model") and controller.design_model is None:
+        controller.design_model = DesignModel.from_dict(data["design_model"])
     return controller
+
+
+def _class_named(path: Any) -> type[Controller] | None:
+    """The controller class ``"module:Qualname"`` (saved by :meth:`Controller.to_dict`), if it can be imported."""
+    import importlib
+
+    if not isinstance(path, str) or ":" not in path:
+        return None
+    module, _, qualname = path.partition(":")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError):
+        return None
+    return obj if isinstance(obj, type) and issubclass(obj, Controller) else None
 
 
 def _unjson(value: Any) -> Any:

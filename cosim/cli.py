@@ -437,6 +437,87 @@ def reproduce_paper_command(seeds: int, scheduler: str | None, workers: int | No
         sys.exit(1)
 
 
+@main.group()
+def design() -> None:
+    """Design a controller on an identified model (cosim model JSON) and save it as JSON.
+
+    \b
+    Example:
+      cosim design pid model.json --output theta_L --phase-margin 60 --u-max 5000 -o pid.json
+      cosim design mpc model.json --measured theta_m,theta_L --tracked theta_L --u-max 5000 -o mpc.json
+    """
+
+
+def _design_model(model_path: str, dt_text: str | None):
+    """The identified model as a continuous named StateSpace, and the controller's sample time."""
+    from .export import to_statespace
+    from .model import IdentifiedModel
+
+    model = IdentifiedModel.load(model_path)
+    if not model.is_linear:
+        raise InvalidSettingError(f"{model_path} is nonlinear, and controllers are designed on a linear model; "
+                                  "identify one with `cosim identify ... --library linear`")
+    dt = parse_number(dt_text, what="--dt") if dt_text else model.dt
+    if dt is None or not dt > 0:
+        raise InvalidSettingError("the model has no sample time; pass the controller's --dt (e.g. --dt 1/2257)")
+    return to_statespace(model), float(dt), model
+
+
+def _limit(text: str | None, option: str) -> float | None:
+    return None if text is None else parse_number(text, what=option)
+
+
+def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], list[str]]:
+    info = {k: v for k, v in controller.info.items()}
+    payload = {"kind": controller.kind, "dt": controller.dt, "inputs": list(controller.inputs),
+               "outputs": list(controller.outputs), "tracked": list(controller.tracked), "info": info}
+    if out:
+        payload["file"] = str(controller.save(out))
+    lines = [f"{controller!r}"] + [f"  {k}: {v}" for k, v in info.items() if not isinstance(v, (dict, list))]
+    if out:
+        lines.append(f"written: {out}")
+    return payload, lines
+
+
+@design.command("pid")
+@click.argument("model_path", metavar="MODEL.json")
+@click.option("--input", "input_name", default=None, help="Manipulated input (default: the model's first).")
+@click.option("--output", "output_name", default=None, help="Controlled output (default: the model's first).")
+@click.option("--dt", "dt_text", default=None, help="Sample time [s] (default: the model's, e.g. 1/2257).")
+@click.option("--phase-margin", type=float, default=None, help="Target phase margin [deg] (default 60).")
+@click.option("--bandwidth-hz", type=float, default=None, help="Target crossover frequency [Hz] instead.")
+@click.option("--gain-margin-db", type=float, default=6.0, show_default=True, help="Least gain margin [dB].")
+@click.option("--no-derivative", is_flag=True, help="Design a PI (no derivative action).")
+@click.option("--u-min", default=None, help="Lower input limit (default: -u-max).")
+@click.option("--u-max", default=None, help="Upper input limit, e.g. 5000.")
+@click.option("--du-max", default=None, help="Largest input change per sample.")
+@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None, help="Write the controller JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print the gains and margins as JSON.")
+@_friendly
+def design_pid(model_path: str, input_name: str | None, output_name: str | None, dt_text: str | None,
+               phase_margin: float | None, bandwidth_hz: float | None, gain_margin_db: float, no_derivative: bool,
+               u_min: str | None, u_max: str | None, du_max: str | None, out: str | None, as_json: bool) -> None:
+    """Tune a discrete PID on the model for a phase margin or a bandwidth; report the margins achieved.
+
+    \b
+    Example:
+      cosim design pid model.json --input Tm --output theta_L --phase-margin 60 --u-max 5000 -o pid.json
+    """
+    from controllers.base import DesignModel
+    from controllers.pid import tune_pid
+
+    sys_c, dt, _ = _design_model(model_path, dt_text)
+    hi = _limit(u_max, "--u-max")
+    lo = _limit(u_min, "--u-min") if u_min is not None else (-hi if hi is not None else None)
+    pid = tune_pid(sys_c, dt=dt, input=input_name, output=output_name, phase_margin=phase_margin,
+                   bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
+                   derivative=False if no_derivative else None, u_min=lo, u_max=hi,
+                   du_max=_limit(du_max, "--du-max"))
+    pid.design_model = DesignModel.from_statespace(sys_c, dt=dt)
+    payload, lines = _design_summary(pid, out)
+    _emit(as_json, payload, "\n".join(lines))
+
+
 def _ranges(items: tuple[str, ...], option: str) -> dict[str, tuple[float, float]]:
     """``("Fc=0:200",)`` -> {"Fc": (0.0, 200.0)}."""
     out = {}
