@@ -404,7 +404,7 @@ def controller_from_json(data: str | Mapping[str, Any]) -> Controller:
         controller = cls(**settings)
     except TypeError as exc:
         raise DataError(f"controller file does not fit kind {kind!r}: {exc}") from None
-    controller.info.update(data.get("info") or {})
+    controller.info.update({k: _unjson(v) for k, v in (data.get("info") or {}).items()})
     if data.get("design_model") and controller.design_model is None:
         controller.design_model = DesignModel.from_dict(data["design_model"])
     return controller

@@ -26,11 +26,11 @@ Examples
 >>> from cosim import build_fmu
 >>> from cosim.closed_loop import closed_loop
 >>> from controllers.pid import PID
->>> pid = PID(kp=4e4, ki=2e4, kd=1.5e4, tf=2e-3, dt=1e-3, inputs=["Tm"], outputs=["theta_L"], u_min=-5000,
-...           u_max=5000)
->>> res = closed_loop(pid, build_fmu(), reference=0.01, duration=2.0, model=None)
->>> res.status, round(float(res.fmu["theta_L"][-1]), 4)
-('completed', 0.01)
+>>> pid = PID(kp=1.5e4, ki=1.3e4, kd=6.4e3, tf=0.022, b=0.33, dt=1e-3, inputs="Tm", outputs="theta_L",
+...           u_min=-5000, u_max=5000)
+>>> res = closed_loop(pid, build_fmu(), reference=0.01, duration=3.0, model=None)
+>>> res.status, round(float(res.fmu["theta_L"][-1]), 4), res.metrics["overshoot_pct"] < 2.0
+('completed', 0.01, True)
 """
 
 from __future__ import annotations

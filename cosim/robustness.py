@@ -14,7 +14,7 @@ Examples
 --------
 >>> from cosim import build_fmu
 >>> from controllers.pid import PID
->>> pid = PID(kp=4e4, ki=2e4, kd=1.5e4, tf=2e-3, dt=1e-3, inputs=["Tm"], outputs=["theta_L"],
+>>> pid = PID(kp=1.5e4, ki=1.3e4, kd=6.4e3, tf=0.022, b=0.33, dt=1e-3, inputs="Tm", outputs="theta_L",
 ...           u_min=-5000, u_max=5000)
 >>> rob = robustness(build_fmu(), pid, "step:amp=0.01,duration=2", ["overshoot<=60%"], samples=3, workers=1,
 ...                  progress=False)
