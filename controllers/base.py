@@ -311,7 +311,11 @@ class Controller(ABC):
 
     @setpoint.setter
     def setpoint(self, value: Any) -> None:
-        r = np.asarray(value, dtype=float)
+        try:
+            r = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise InvalidSettingError(f"setpoint needs {len(self.tracked)} number(s) for {list(self.tracked)}, "
+                                      f"got {value!r}") from None
         if r.ndim == 0:
             r = np.full(len(self.tracked), float(r))
         if r.shape != (len(self.tracked),) or not np.all(np.isfinite(r)):
@@ -404,7 +408,8 @@ def controller_from_json(data: str | Mapping[str, Any]) -> Controller:
         controller = cls(**settings)
     except TypeError as exc:
         raise DataError(f"controller file does not fit kind {kind!r}: {exc}") from None
-    controller.info.update({k: _unjson(v) for k, v in (data.get("info") or {}).items()})
+    for key, value in (data.get("info") or {}).items():  # what the constructor computed here wins over the file
+        controller.info.setdefault(key, _unjson(value))
     if data.get("design_model") and controller.design_model is None:
         controller.design_model = DesignModel.from_dict(data["design_model"])
     return controller
