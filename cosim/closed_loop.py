@@ -150,7 +150,7 @@ class ClosedLoopResult:
         The loop against the FMU: the reference ``r_<tracked>`` for each tracked output, the plant inputs
         (row k held over ``[t_k, t_{k+1})``; the last row repeats the last input) and the plant outputs.
     model : Trajectory or None
-        The same loop against the model (same columns; outputs the model lacks are NaN), or None.
+        The same loop against the model (same columns, less the outputs the model does not have), or None.
     compute_time : numpy.ndarray
         Seconds each controller call took in the FMU loop.
     metrics : dict
@@ -481,6 +481,8 @@ def _trajectory(t: np.ndarray, refs: np.ndarray, U: np.ndarray, Y: np.ndarray, c
         signals[name] = U[:, j]
         roles[name] = "input"
     for j, name in enumerate(outputs):
+        if np.all(np.isnan(Y[:, j])):
+            continue  # an output the model does not have
         signals[name] = Y[:, j]
         roles[name] = "output"
     return Trajectory.from_arrays(t, signals, roles=roles, meta=meta)

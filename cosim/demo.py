@@ -4,7 +4,10 @@ Stage by stage, as capabilities land: build the FMU, simulate it with the refere
 excitation and initial state, with and without an undeclared effect (Coulomb friction) and with measurement
 noise; identify a linear SINDYc model from the noisy data (the model lacks the friction: its free-run error
 is what the diagnosis stage will explain), save it, export it to MATLAB, and write the data and plots.
-Diagnosis and control join here as they arrive.
+Then design a PID (velocity feedback from the motor) and an MPC on the identified model, validate both
+against the FMU with the friction on (a 0.01 rad load-angle step and a 500 N m load-torque step, the
+telescope specs of :mod:`cosim.validation`), and write one HTML report with every plot. Diagnosis joins here
+when it arrives.
 
 Examples
 --------
@@ -24,12 +27,17 @@ from typing import Any
 import numpy as np
 
 from .build import build_fmu
-from .export import export_mat
+from .export import export_mat, to_statespace
 from .identification import STUDY_SETTINGS, SINDYc
 from .metrics import nrmse_fit_pct, r2
-from .plots import plot_trajectory
+from .plots import plot_closed_loop, plot_trajectory
+from .report import Report
 from .simulation import simulate
 from .study import STATES, STUDY_DT, STUDY_X0
+from .validation import TELESCOPE_SPECS, disturbance_step, setpoint_step, validate
+
+#: The demo's closed-loop scenarios: a 0.01 rad load-angle step, then a 500 N m load-torque step.
+DEMO_SCENARIOS = (setpoint_step(0.01, at=0.05, duration=1.5), disturbance_step(500.0, at=0.3, duration=1.5))
 
 __all__ = ["run_demo"]
 
@@ -74,17 +82,76 @@ def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: flo
                                others=[("linear SINDYc model, free run", sim.to_trajectory())],
                                title="Identified linear model against the data it lacks friction for")
     truth = effect[list(STATES)]
+    fit = {"fit_r2": dict(zip(STATES, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
+           "fit_nrmse_pct": dict(zip(STATES, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
+                                     strict=True))}
+    report = Report("cosim demo", subtitle=f"Bundled two-mass servo FMU with Coulomb friction Fc={friction:g} N m "
+                    f"and {noise:.0%} measurement noise; linear SINDYc model; PID and MPC designed on it, validated "
+                    "on the FMU")
+    _data_sections(report, plot, fit_plot, model, fit)
+    control_summary = _control_stage(report, model, fmu, out, friction=friction)
+    report_path = report.write(out / "report.html")
     return {
         "equations": model.equations(),
         "model": str(out / "model.json"),
-        "fit_r2": dict(zip(STATES, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
-        "fit_nrmse_pct": dict(zip(STATES, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
-                                  strict=True)),
+        **fit,
         "model_plot": str(fit_plot),
         "fmu": str(fmu),
         "data": str(Path(data)),
         "plot": str(plot),
         "samples": len(measured),
         "dt": STUDY_DT,
+        "controllers": control_summary,
+        "report": str(report_path),
         "seconds": round(time.perf_counter() - started, 3),
     }
+
+
+def _data_sections(part: Report, plot: Path, fit_plot: Path, model: Any, fit: dict[str, Any]) -> None:
+    """The data and identification sections of the report."""
+    part.add_figure("Data from the FMU", plot, caption="Square-wave torque, the study's initial state; with and "
+                    "without friction.")
+    part.add_text("Identified linear model (SINDYc)", "\n\n".join(model.equations()))
+    part.add_table(None, [{"state": k, "R2": fit["fit_r2"][k], "NRMSE fit %": fit["fit_nrmse_pct"][k]}
+                          for k in fit["fit_r2"]], caption="free run of the model against the noise-free data")
+    part.add_figure(None, fit_plot, caption="The linear model lacks the friction.")
+
+
+def _control_stage(report: Report, model: Any, fmu: Path, out: Path, *, friction: float) -> dict[str, Any]:
+    """Design a PID and an MPC on `model`, validate both on the FMU with friction; add them to `report`."""
+    from controllers.mpc import MPC
+    from controllers.pid import tune_pid
+
+    sys_c = to_statespace(model)
+    limits = {"u_min": -5000.0, "u_max": 5000.0}
+    pid = tune_pid(sys_c, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", **limits)
+    mpc = MPC(sys_c, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"], tracked=["theta_L"],
+              **limits)
+    summary: dict[str, Any] = {}
+    for name, controller in (("pid", pid), ("mpc", mpc)):
+        if controller.design_model is None:
+            from controllers.base import DesignModel
+
+            controller.design_model = DesignModel.from_statespace(sys_c, dt=STUDY_DT)
+        controller.save(out / f"{name}.json")
+        verdict = validate(fmu, controller, DEMO_SCENARIOS, TELESCOPE_SPECS, parameters={"Fc": friction})
+        pngs = [plot_closed_loop(result, out / f"closed_loop_{name}_{i}.png", title=f"{name.upper()}: {s.name}")
+                for i, (s, result) in enumerate(zip(verdict.scenarios, verdict.results, strict=True), start=1)]
+        step = verdict.results[0].metrics
+        summary[name] = {"passed": verdict.passed, "reasons": list(verdict.reasons),
+                         "settling_time": step["settling_time"], "overshoot_pct": step["overshoot_pct"],
+                         "steady_state_error": step["steady_state_error"],
+                         "solve_time_us": verdict.solve_time_us(), "file": str(out / f"{name}.json"),
+                         "plots": [str(p) for p in pngs]}
+        rows = [{"scenario": c["scenario"], "spec": c["spec"],
+                 "value": "n/a" if c["value"] is None else float(f"{c['value']:.4g}"),
+                 "result": "n/a" if c["passed"] is None else ("met" if c["passed"] else "NOT MET")}
+                for c in verdict.checks]
+        report.add_table(f"{name.upper()} on the FMU with friction: {'PASSED' if verdict.passed else 'FAILED'}",
+                         rows, highlight={(i, "result"): c["passed"] for i, c in enumerate(verdict.checks)
+                                          if c["passed"] is not None},
+                         caption=f"compute time per call: median {verdict.solve_time_us()['median']:.1f} µs, "
+                                 f"p99 {verdict.solve_time_us()['p99']:.1f} µs")
+        for png in pngs:
+            report.add_figure(None, png)
+    return summary

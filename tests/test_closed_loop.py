@@ -112,3 +112,16 @@ def test_model_plant_steps_like_the_discrete_model():
     y = plant.step([100.0, 0.0])
     x0 = np.array([0.0, 0.0, 0.1, 0.0])
     np.testing.assert_allclose(y, model.A @ x0 + model.B @ [100.0, 0.0], rtol=1e-12)
+
+
+def test_model_run_notes_what_the_model_cannot_do(fmu):
+    partial = StateFeedback()
+    sys = true_model()
+    partial.design_model = DesignModel.from_statespace(sys[[0, 2], :], dt=DT)  # positions only
+    res = closed_loop(partial, fmu, duration=0.2, reference=0.01)
+    assert res.model is None and any("lacks a measured output" in note for note in res.notes)
+    no_tl = StateFeedback()
+    no_tl.design_model = DesignModel.from_statespace(sys[:, 0], dt=DT)  # no TL input
+    res = closed_loop(no_tl, fmu, duration=0.2, reference=0.01, disturbance={"TL": 100.0})
+    assert res.model is not None and any("no input TL" in note for note in res.notes)
+    assert res.metrics["model_discrepancy_rms"] > 0
