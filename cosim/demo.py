@@ -14,8 +14,8 @@ Examples
 --------
 >>> import tempfile
 >>> result = run_demo(tempfile.mkdtemp())
->>> sorted(result)[:3]
-['data', 'dt', 'equations']
+>>> sorted(result)[:3], result["controllers"]["mpc"]["passed"]
+(['controllers', 'data', 'dt'], True)
 """
 
 from __future__ import annotations
