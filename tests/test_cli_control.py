@@ -51,7 +51,7 @@ def mpc_file(model_file, tmp_path_factory):
 @pytest.mark.parametrize("which", ["pid_file", "mpc_file"])
 def test_validate_passes_with_friction_and_prints_the_json_keys(which, request, tmp_path):
     ctrl = request.getfixturevalue(which)
-    code, text, _ = run("validate", "bundled", ctrl, "--scenario", "step:amp=0.01,duration=1.5", "--set", "Fc=100",
+    code, text, _ = run("validate", "bundled", ctrl, "--scenario", "step:amp=0.01,duration=2", "--set", "Fc=100",
                         "--spec", "settling_time<=1", "--spec", "overshoot<=10%", "--spec",
                         "steady_state_error<=2e-5", "--spec", "input_limit<=5000", "--json", "--report",
                         tmp_path / "v.html")
