@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -85,18 +85,13 @@ class RobustnessResult:
         return Path(path)
 
 
-def _score(specs: Sequence[Spec], metrics: Mapping[str, Any]) -> float:
-    worst = 0.0
-    for spec in specs:
-        value = metrics.get(spec.metric)
-        if value is None or not math.isfinite(value):
-            return math.inf
-        if spec.op in ("<=", "<"):
-            ratio = value / spec.limit if spec.limit > 0 else (math.inf if value > spec.limit else 0.0)
-        else:
-            ratio = spec.limit / value if value > 0 else math.inf
-        worst = max(worst, ratio)
-    return worst
+def _ratio(op: str, value: float | None, limit: float) -> float:
+    """How close `value` comes to `limit` (1 = on the limit, above 1 = beyond it)."""
+    if value is None or not math.isfinite(value):
+        return math.inf
+    if op in ("<=", "<"):
+        return value / limit if limit > 0 else (math.inf if value > limit else 0.0)
+    return limit / value if value > 0 else math.inf
 
 
 def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[str, Any]], specs: list[str],
@@ -105,16 +100,16 @@ def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[s
     from controllers.base import controller_from_json
 
     ctrl = controller_from_json(controller)
-    verdict = validate(fmu, ctrl, [Scenario.from_dict(s) for s in scenarios], specs, parameters=parameters,
-                       model=None, progress=False)
-    spec_list = [parse_spec(s) for s in specs]
+    # the drawn plant wins over a scenario's own parameters; the scenario keeps its name (the table's columns)
+    runs = [replace(Scenario.from_dict(s), parameters={**s.get("parameters", {}), **parameters}, name=s["name"])
+            for s in scenarios]
+    verdict = validate(fmu, ctrl, runs, specs, model=None, progress=False)
     metrics: dict[str, Any] = {}
-    for scenario, result in zip(verdict.scenarios, verdict.results, strict=True):
-        prefix = f"{scenario.name}|" if len(verdict.results) > 1 else ""
-        for spec in spec_list:
-            value = result.metrics.get(spec.metric)
-            metrics[prefix + spec.metric] = None if value is None or not math.isfinite(value) else float(value)
-    score = max(_score(spec_list, r.metrics) for r in verdict.results)
+    for check in verdict.checks:
+        prefix = f"{check['scenario']}|" if len(runs) > 1 else ""
+        metrics[prefix + check["metric"]] = check["value"]
+    score = max((_ratio(parse_spec(c["spec"]).op, c["value"], c["limit"]) for c in verdict.checks
+                 if c["passed"] is not None), default=0.0)
     return {"passed": verdict.passed, "reasons": list(verdict.reasons), "metrics": metrics,
             "score": score if math.isfinite(score) else None}
 
