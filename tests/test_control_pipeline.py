@@ -93,3 +93,12 @@ def test_infeasible_mpc_in_closed_loop_falls_back_then_stops_with_time_and_reaso
     assert stop["kind"] == "controller_error" and "infeasible" in stop["message"]
     assert res.stopped_at == pytest.approx(infeasible[-1]["time"] + STUDY_DT, abs=1.5 * STUDY_DT)
     assert len(res.fmu) > 0.1 / STUDY_DT  # the trajectory up to the stop is kept
+
+
+@pytest.mark.slow
+def test_example_script_asserts_its_own_result():
+    import runpy
+    from pathlib import Path
+
+    figures = runpy.run_path(str(Path(__file__).parents[1] / "examples" / "design_and_validate.py"))["main"]()
+    assert set(figures) == {"pid", "mpc"} and figures["mpc"]["settling_time_s"] <= 1.0
