@@ -33,6 +33,7 @@ import numpy as np
 import scipy.linalg
 
 from cosim.errors import BuildError, ControllerError, InvalidSettingError, UnknownVariableError
+from cosim.numbers import finite_number as _number
 
 from ._qp_codegen import BoundFunction, StepProblem, codegen_support, compile_function, condense, step_function
 from .base import KNOWN_CONSTANT_INPUTS, Controller, DesignModel, register
@@ -105,16 +106,6 @@ def _square_matrix(value: Any, names: Sequence[str], what: str, *, allow_matrix:
     if np.min(np.linalg.eigvalsh(M)) < -1e-12 * max(1.0, float(np.max(np.abs(M)))):
         raise InvalidSettingError(f"{what} must be non-negative (positive semi-definite)")
     return M
-
-
-def _number(value: Any, what: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InvalidSettingError(f"{what} must be a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise InvalidSettingError(f"{what} must be finite, got {value!r}")
-    return x
 
 
 def _vector(value: Any, names: Sequence[str], what: str, default: float) -> np.ndarray:

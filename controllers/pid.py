@@ -61,6 +61,7 @@ import control
 import numpy as np
 
 from cosim.errors import ControllerError, InvalidSettingError
+from cosim.numbers import finite_number as _finite
 
 from .base import Controller, register
 from .pid_tuning import tune_pid
@@ -71,19 +72,6 @@ __all__ = ["ANTI_WINDUP", "PID", "tune_pid"]
 ANTI_WINDUP = ("back-calculation", "clamping")
 #: Derivative filter ``n = Td/tf`` when neither `tf` nor `n` is given (no filter on a measured velocity).
 DEFAULT_N = 10.0
-
-
-def _finite(value: Any, name: str, *, low: float | None = None, strict: bool = False) -> float:
-    """`value` as a finite float, at least (or, with `strict`, above) `low`; InvalidSettingError otherwise."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InvalidSettingError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x):
-        raise InvalidSettingError(f"{name} must be finite, got {value!r}")
-    if low is not None and (x <= low if strict else x < low):
-        raise InvalidSettingError(f"{name} must be {'>' if strict else '>='} {low:g}, got {x:g}")
-    return x
 
 
 def _names(value: Any) -> list[Any]:

@@ -13,10 +13,11 @@ True
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from .errors import InvalidSettingError
 
-__all__ = ["parse_number"]
+__all__ = ["finite_number", "parse_number"]
 
 
 def parse_number(text: str | float, *, what: str = "value") -> float:
@@ -43,3 +44,25 @@ def parse_number(text: str | float, *, what: str = "value") -> float:
     if not math.isfinite(value):
         raise InvalidSettingError(f"{what}: {text!r} is not a finite number")
     return value
+
+
+def finite_number(value: Any, name: str, *, low: float | None = None, strict: bool = False) -> float:
+    """`value` as a finite float, at least (or, with `strict`, above) `low`; InvalidSettingError otherwise.
+
+    Examples
+    --------
+    >>> finite_number("2.5", "kp", low=0.0)
+    2.5
+    >>> finite_number(-1, "kp", low=0.0)
+    Traceback (most recent call last):
+    cosim.errors.InvalidSettingError: kp must be >= 0, got -1
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InvalidSettingError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise InvalidSettingError(f"{name} must be finite, got {value!r}")
+    if low is not None and (x <= low if strict else x < low):
+        raise InvalidSettingError(f"{name} must be {'>' if strict else '>='} {low:g}, got {x:g}")
+    return x
