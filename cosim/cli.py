@@ -633,8 +633,9 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
 
     \b
     Example:
-      cosim validate bundled ctrl.json --scenario step:amp=0.01,duration=2 --set Fc=100 \
-        --spec settling_time<=1 --spec overshoot<=10% --json --report validation.html
+      cosim validate bundled ctrl.json --scenario step:amp=0.01,duration=2 --set Fc=100 --json
+      cosim validate bundled ctrl.json --spec settling_time<=1 --spec overshoot<=10% --report v.html
+      cosim validate bundled ctrl.json --robustness 50 --spread 0.2 --effect Fc=0:200
     """
     from controllers.base import load_controller
 
