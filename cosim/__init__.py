@@ -42,6 +42,10 @@ _LAZY = {
     "run_sweep": "sweep",
     "SweepResult": "sweep",
     "reproduce_paper": "reproduce",
+    "ResidualAnalysis": "residuals",
+    "ClosedLoopResult": "closed_loop",
+    "validate": "validation",
+    "Verdict": "validation",
 }
 
 
