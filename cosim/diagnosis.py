@@ -1,0 +1,569 @@
+"""Diagnosis: trace the residual of a model to the physical effect it lacks, add it, report before and after.
+
+``diagnose(model, data)`` does, round after round:
+
+1. **Screen** every catalogued effect (:mod:`cosim.effects`) at every place it can attach (found from the
+   model's equations) and over its nuisance grid, on the **integral equation error**: over disjoint windows of
+   `window` samples, ``x[b] - x[a] = sum_j c_j * integral of term_j`` (trapezoidal, inputs held), which
+   averages the measurement noise that a derivative would amplify. Each dynamic row is refitted with the
+   candidate's terms added to the row's present terms (so a candidate that only repeats a present term
+   explains nothing); the candidate enters the rows where it lowers BIC.
+2. **Rank** the candidates by the change of BIC (Gaussian likelihood per row), and test each with the
+   likelihood-ratio statistic against chi-square (its p-value). A candidate is **significant** when its p-value
+   is below `alpha`, it lowers BIC by more than `bic_margin`, *and* it moves the row by at least `min_size`
+   of the row's own motion (RMS over the windows): the first two are strict because the search tries a few
+   hundred candidates (data without an effect must give "no effect found"), the third because on long or
+   noise-free records a negligible mismatch (discretisation, say) is significant without being physical.
+3. **Refine** the winner's nuisance parameter by a bounded scalar search around its best grid value, **add**
+   its terms to the model's library, and go to the next round while a significant effect remains (at most
+   `max_effects`).
+4. **Refit** the model with every accepted effect by SINDYc with output-error refinement (unbiased under
+   measurement noise), and **report** the free-run error before and after (R², NRMSE fit %, maximum deviation,
+   residual whiteness), each effect's physical parameters with their standard errors (from the output-error
+   Jacobian, through the row's input gain), and plots of the evidence.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cosim.model import IdentifiedModel
+>>> from cosim.trajectory import Trajectory
+>>> dt, n = 1e-3, 6000
+>>> t = np.arange(n + 1) * dt
+>>> u = 3.0 * np.sin(2 * np.pi * 1.3 * t) + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t))
+>>> x, v = np.zeros(n + 1), np.zeros(n + 1)
+>>> for k in range(n):    # a mass with viscous and Coulomb friction, Fc = 1 N (Euler, 10 substeps)
+...     xs, vs = x[k], v[k]
+...     for _ in range(10):
+...         xs, vs = xs + 1e-4 * vs, vs + 1e-4 * (u[k] - 2.0 * vs - 1.0 * np.tanh(vs / 1e-3))
+...     x[k + 1], v[k + 1] = xs, vs
+>>> data = Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, roles={"x": "state", "v": "state", "u": "input"})
+>>> linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u"),
+...                          coef=np.array([[1.0, 0.0], [-2.0, 1.0]]))
+>>> report = diagnose(linear, data, refine=False)
+>>> [e.name for e in report.effects], round(report.effects[0].parameters["Fc"], 1)
+(['coulomb_friction'], 1.0)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import optimize, stats
+
+from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
+from .errors import DataError
+from .metrics import max_deviation_pct, nrmse_fit_pct, r2
+from .model import IdentifiedModel
+from .residuals import ResidualAnalysis, residuals
+from .terms import Term
+from .trajectory import Trajectory
+
+__all__ = ["DiagnosisReport", "EffectCandidate", "diagnose"]
+
+#: Default significance level of one candidate (strict: a few hundred candidates are tried).
+ALPHA = 1e-6
+#: Default least BIC decrease of a significant candidate.
+BIC_MARGIN = 30.0
+#: Default least size of a significant effect: its share of the row's motion (RMS over the windows).
+MIN_SIZE = 0.005
+
+
+@dataclass(frozen=True)
+class EffectCandidate:
+    """One effect at one place with one nuisance value, scored on the integral equation error.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue name.
+    attached_to : str
+        The signal (or pair ``"a-b"``, or ``"constant"``) it acts on.
+    rows : tuple of str
+        The states' equations it enters.
+    nuisance : float or None
+        The nuisance parameter (smoothing velocity, width, periods, delay in samples).
+    terms : tuple of str
+        The term expressions it adds.
+    delta_bic : float
+        Change of BIC when added (negative: better).
+    p_value : float
+        Likelihood-ratio test against the model without it.
+    explained : dict of str to float
+        Per row, the fraction of the row's residual sum of squares it removes.
+    significant : bool
+    parameters : dict of str to float
+        Physical parameters from the coefficients (see :mod:`cosim.effects`).
+    uncertainty : dict of str to float
+        Standard errors of the parameters where known.
+    meaning : str
+        The effect's physical meaning.
+    """
+
+    name: str
+    attached_to: str
+    rows: tuple[str, ...]
+    nuisance: float | None
+    terms: tuple[str, ...]
+    delta_bic: float
+    p_value: float
+    explained: dict[str, float]
+    significant: bool
+    parameters: dict[str, float] = field(default_factory=dict)
+    uncertainty: dict[str, float] = field(default_factory=dict)
+    meaning: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "attached_to": self.attached_to, "rows": list(self.rows),
+                "nuisance": self.nuisance, "terms": list(self.terms), "delta_bic": self.delta_bic,
+                "p_value": self.p_value, "explained": dict(self.explained), "significant": self.significant,
+                "parameters": dict(self.parameters), "uncertainty": dict(self.uncertainty), "meaning": self.meaning}
+
+
+# ---------------------------------------------------------------------------------------------- the screening
+class _Screen:
+    """Integral-form regressions of each dynamic row, with the model's present terms and a candidate's."""
+
+    def __init__(self, model: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, window: int) -> None:
+        self.model, self.columns, self.dt = model, columns, dt
+        n = len(next(iter(columns.values()))) - 1
+        # disjoint windows [a, a + window], one sample apart: their endpoint noise is independent
+        self.a = np.arange(0, n - window + 1, window + 1)
+        self.b = self.a + window
+        self.n_eq = len(self.a)
+        self.roles = Roles.of(model)
+        self.rows = {}
+        for row in self.roles.dynamic_rows:
+            i = model.states.index(row)
+            present = tuple(t for k, t in enumerate(model.terms) if model.coef[i, k] != 0.0)
+            y = columns[row][self.b] - columns[row][self.a]
+            base = self.integrate(present)
+            rss = self._rss(y, base)
+            self.rows[row] = (y, base, present, rss)
+
+    def integrate(self, terms: Sequence[str]) -> np.ndarray:
+        """Integral of each term over every window (trapezoid with the inputs held at their left sample)."""
+        if not terms:
+            return np.zeros((self.n_eq, 0))
+        now = {k: v[:-1] for k, v in self.columns.items()}
+        nxt = {k: v[1:] for k, v in self.columns.items()}
+        for name in self.model.inputs:  # held over the sample
+            nxt[name] = now[name]
+        for name in self.columns:
+            if name not in self.model.states:
+                nxt[name] = now[name]
+        out = []
+        for text in terms:
+            term = Term(text)
+            f = 0.5 * self.dt * (np.broadcast_to(term.evaluate(now), now[self.model.states[0]].shape) +
+                                 np.broadcast_to(term.evaluate(nxt), now[self.model.states[0]].shape))
+            g = np.concatenate([[0.0], np.cumsum(f)])
+            out.append(g[self.b] - g[self.a])
+        return np.column_stack(out)
+
+    @staticmethod
+    def _rss(y: np.ndarray, design: np.ndarray) -> float:
+        if design.shape[1] == 0:
+            return float(y @ y)
+        scale = np.linalg.norm(design, axis=0)
+        scale[scale == 0] = 1.0
+        coef, *_ = np.linalg.lstsq(design / scale, y, rcond=None)
+        r = y - (design / scale) @ coef
+        return float(r @ r)
+
+    def fit(self, row: str, extra: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """RSS of the row with `extra` columns, the coefficients of the extra columns, and their std errors."""
+        y, base, _, _ = self.rows[row]
+        design = np.column_stack([base, extra])
+        scale = np.linalg.norm(design, axis=0)
+        scale[scale == 0] = 1.0
+        coef, *_ = np.linalg.lstsq(design / scale, y, rcond=None)
+        r = y - (design / scale) @ coef
+        rss = float(r @ r)
+        dof = max(len(y) - design.shape[1], 1)
+        try:
+            cov = np.linalg.pinv((design / scale).T @ (design / scale)) * rss / dof
+            se = np.sqrt(np.clip(np.diag(cov), 0, None)) / scale
+        except np.linalg.LinAlgError:
+            se = np.full(design.shape[1], math.nan)
+        coef = coef / scale
+        q = extra.shape[1]
+        return rss, coef[-q:], se[-q:]
+
+    def score(self, effect: Effect, attachment: Attachment, value: float | None,
+              alpha: float, bic_margin: float, min_size: float = MIN_SIZE) -> EffectCandidate | None:
+        extra_cols = effect.columns(attachment, value, self.columns)
+        if extra_cols:
+            self.columns.update(extra_cols)
+        terms = effect.terms(attachment, value)
+        try:
+            extra = self.integrate(terms)
+        except (FloatingPointError, ValueError):
+            return None
+        if not np.all(np.isfinite(extra)) or np.allclose(extra, 0.0):
+            return None
+        n = self.n_eq
+        q = extra.shape[1]
+        rows, delta, lr, explained, coef, se, size = [], 0.0, 0.0, {}, {}, {}, 0.0
+        for row in attachment.rows:
+            if row not in self.rows:
+                continue
+            rss0 = self.rows[row][3]
+            rss1, c, s = self.fit(row, extra)
+            if rss0 <= 0 or rss1 <= 0:
+                continue
+            d_bic = n * math.log(rss1 / rss0) + q * math.log(n)
+            if d_bic < 0:
+                rows.append(row)
+                delta += d_bic
+                lr += -n * math.log(rss1 / rss0)
+                explained[row] = 1.0 - rss1 / rss0
+                coef[row], se[row] = c, s
+                # nested least squares: |fit with - fit without|^2 = rss0 - rss1 (collinear terms move little)
+                y = self.rows[row][0]
+                size = max(size, math.sqrt(rss0 - rss1) / max(float(np.linalg.norm(y)), 1e-300))
+        if not rows:
+            return EffectCandidate(effect.name, attachment.label, (), value, terms, 0.0, 1.0, {}, False,
+                                   meaning=effect.meaning)
+        p = float(stats.chi2.sf(lr, q * len(rows)))
+        params = effect.parameters(coef, value, self.roles, Attachment(attachment.label, attachment.signals,
+                                                                        tuple(rows)))
+        return EffectCandidate(effect.name, attachment.label, tuple(rows), value, terms, delta, p, explained,
+                               bool(p < alpha and delta < -bic_margin and size >= min_size), parameters=params,
+                               uncertainty=_uncertainty(effect, coef, se, value, self.roles),
+                               meaning=effect.meaning)
+
+
+def _uncertainty(effect: Effect, coef: dict, se: dict, value: float | None, roles: Roles) -> dict[str, float]:
+    """Standard errors of force-like parameters: the coefficient's, through the row's input gain."""
+    out = {}
+    for row, s in se.items():
+        if row in roles.input_gain and len(s):
+            out[f"{row}"] = float(abs(s[0] / roles.input_gain[row][1]))
+    return out
+
+
+def _best_for(screen: _Screen, effect: Effect, attachment: Attachment, alpha: float,
+              bic_margin: float) -> EffectCandidate | None:
+    """The best nuisance value for one effect at one place: the grid, then a bounded search around its best."""
+    grid = effect.grid(attachment, screen.columns)
+    scored = [(c.delta_bic, i, c) for i, v in enumerate(grid)
+              if (c := screen.score(effect, attachment, v, alpha, bic_margin)) is not None]
+    if not scored:
+        return None
+    _, i_best, best = min(scored, key=lambda s: (s[0], s[1]))
+    if effect.nuisance is None or not best.rows or len(grid) < 2:
+        return best
+    if effect.integer:
+        return best  # integer grids (periods, delays) are exhaustive over their range
+    lo = grid[max(i_best - 1, 0)]
+    hi = grid[min(i_best + 1, len(grid) - 1)]
+
+    def cost(log_v: float) -> float:
+        c = screen.score(effect, attachment, float(math.exp(log_v)), alpha, bic_margin)
+        return c.delta_bic if c is not None and c.rows else 0.0
+
+    res = optimize.minimize_scalar(cost, bounds=(math.log(lo), math.log(hi)), method="bounded",
+                                   options={"xatol": 1e-3})
+    refined = screen.score(effect, attachment, float(math.exp(res.x)), alpha, bic_margin)
+    return refined if refined is not None and refined.delta_bic < best.delta_bic else best
+
+
+# ---------------------------------------------------------------------------------------------- the report
+@dataclass(frozen=True)
+class DiagnosisReport:
+    """What :func:`diagnose` found.
+
+    Attributes
+    ----------
+    effects : tuple of EffectCandidate
+        The accepted effects, in the order found (empty: no effect found), with parameters from the final
+        refit.
+    ranking : tuple of EffectCandidate
+        The first round's best candidate of every effect, best first.
+    rounds : tuple of tuple of EffectCandidate
+        Each round's ranking.
+    model_before, model_after : IdentifiedModel
+    before, after : dict
+        ``r2``, ``nrmse_pct``, ``max_dev_pct`` (means over the states, and per state under ``per_state``), and
+        ``white`` (the free-run residual passes the whiteness test for every state).
+    residuals_before, residuals_after : ResidualAnalysis
+    message : str
+        One sentence: what was found, or "no effect found" and whether the residual is white.
+    """
+
+    effects: tuple[EffectCandidate, ...]
+    ranking: tuple[EffectCandidate, ...]
+    rounds: tuple[tuple[EffectCandidate, ...], ...]
+    model_before: IdentifiedModel
+    model_after: IdentifiedModel
+    before: dict[str, Any]
+    after: dict[str, Any]
+    residuals_before: ResidualAnalysis
+    residuals_after: ResidualAnalysis
+    message: str
+    data: Trajectory | None = None
+
+    @property
+    def found(self) -> bool:
+        return bool(self.effects)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: ``effects`` (ranked, empty when none), ``before``/``after`` with ``nrmse_pct`` and ``r2``."""
+        return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
+                "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
+                "equations_after": self.model_after.equations()}
+
+    def plot_evidence(self, path: str | os.PathLike) -> Path:
+        """PNG: for each accepted effect (or the top candidate), the equation residual of its row against the
+        signal it attaches to, before and after: friction shows as a step at zero speed that disappears."""
+        from .plots import plt, save_figure
+
+        shown = list(self.effects) or list(self.ranking[:1])
+        fig, axes = plt.subplots(1, max(len(shown), 1), figsize=(5.5 * max(len(shown), 1), 4.2), squeeze=False)
+        for ax, cand in zip(axes[0], shown, strict=False):
+            row = cand.rows[0] if cand.rows else self.model_before.states[-1]
+            i = self.model_before.states.index(row)
+            signal_name = cand.attached_to.split("-")[0] if cand.attached_to != "constant" else None
+            x_data = self.data[signal_name][:-1] if self.data is not None and signal_name in self.data.names else \
+                self.residuals_before.time[1:]
+            step = max(1, len(x_data) // 6000)
+            ax.plot(x_data[::step], self.residuals_before.equation[::step, i], ".", ms=1.5, alpha=0.5,
+                    label="before (model without it)")
+            ax.plot(x_data[::step], self.residuals_after.equation[::step, i], ".", ms=1.5, alpha=0.5,
+                    label="after (model with it)")
+            ax.set_xlabel(signal_name or "time [s]")
+            ax.set_ylabel(f"equation residual of {row}'")
+            ax.set_title(f"{cand.name} on {cand.attached_to}", fontsize=9)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8, markerscale=5)
+        fig.tight_layout()
+        return save_figure(fig, path)
+
+    def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis") -> Path:
+        """One HTML file: the verdict, the ranking, the parameters, before/after figures and the plots."""
+        from .plots import plot_trajectory
+        from .report import Report
+
+        path = Path(path)
+        stem = path.with_suffix("")
+        report = Report(title, subtitle=self.message)
+        report.add_table("Effects found", [{"rank": i + 1, "effect": e.name, "attached to": e.attached_to,
+                                            "rows": ", ".join(e.rows), "meaning": e.meaning,
+                                            **{k: float(f"{v:.5g}") for k, v in e.parameters.items()},
+                                            **{f"±{k}": float(f"{v:.3g}") for k, v in e.uncertainty.items()}}
+                                           for i, e in enumerate(self.effects)] or [{"result": "no effect found"}])
+        report.add_table("Error before and after", [
+            {"": "before", **{k: self.before[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}},
+            {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
+            caption="free-run simulation against the data; means over the states")
+        report.add_table("Candidates (first round)", [
+            {"effect": c.name, "attached to": c.attached_to, "nuisance": c.nuisance, "delta BIC": round(c.delta_bic, 1),
+             "p-value": float(f"{c.p_value:.3g}"), "significant": c.significant} for c in self.ranking])
+        report.add_figure("Evidence", self.plot_evidence(f"{stem}_evidence.png"))
+        report.add_figure("Residuals before", self.residuals_before.plot(f"{stem}_residuals_before.png"))
+        report.add_figure("Residuals after", self.residuals_after.plot(f"{stem}_residuals_after.png"))
+        if self.data is not None:
+            sims = []
+            for label, model in (("before", self.model_before), ("after", self.model_after)):
+                sim = _free_run(model, self.data)
+                if sim is not None:
+                    sims.append((f"model {label}", sim))
+            report.add_figure("Free run against the data",
+                              plot_trajectory(self.data.select(list(self.model_before.states)),
+                                              f"{stem}_free_run.png", label="data", others=sims))
+        report.add_text("Equations after", "\n\n".join(self.model_after.equations()))
+        return report.write(path)
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _columns(model: IdentifiedModel, data: Trajectory) -> dict[str, np.ndarray]:
+    missing = [n for n in (*model.states, *model.inputs) if n not in data.names]
+    if missing:
+        from .errors import UnknownVariableError
+
+        raise UnknownVariableError(f"the data have no column {missing[0]!r} that the model needs; "
+                                   f"columns are {list(data.names)}")
+    return {name: np.asarray(data[name], dtype=float) for name in data.names}
+
+
+def _x0(model: IdentifiedModel, data: Trajectory) -> np.ndarray:
+    meta_x0 = model.meta.get("x0") if isinstance(model.meta, Mapping) else None
+    if meta_x0:
+        return np.asarray(meta_x0[0], dtype=float)
+    return np.array([data[name][0] for name in model.states])
+
+
+def _free_run(model: IdentifiedModel, data: Trajectory) -> Trajectory | None:
+    u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
+    sim = model.simulate(_x0(model, data), u[:-1], dt=data.dt, t0=float(data.time[0]))
+    return sim.to_trajectory() if sim.ok else None
+
+
+def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis) -> dict[str, Any]:
+    truth = np.column_stack([data[name] for name in model.states])
+    u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
+    sim = model.simulate(_x0(model, data), u[:-1], dt=data.dt)
+    if not sim.ok:
+        return {"r2": None, "nrmse_pct": None, "max_dev_pct": None, "white": False, "status": sim.status,
+                "per_state": {}}
+    fit = np.atleast_1d(nrmse_fit_pct(truth, sim.states))
+    rr = np.atleast_1d(r2(truth, sim.states))
+    dev = np.atleast_1d(max_deviation_pct(truth, sim.states))
+    per_state = {name: {"r2": float(rr[i]), "nrmse_pct": float(100.0 - fit[i]), "fit_pct": float(fit[i]),
+                        "max_dev_pct": float(dev[i])} for i, name in enumerate(model.states)}
+    return {"r2": float(np.mean(rr)), "nrmse_pct": float(np.mean(100.0 - fit)), "max_dev_pct": float(np.mean(dev)),
+            "white": bool(res.white), "status": sim.status, "per_state": per_state}
+
+
+def _kinematics(model: IdentifiedModel) -> dict[str, str]:
+    return dict(Roles.of(model).velocity_of)
+
+
+def _refit(model: IdentifiedModel, data: Trajectory, extra_terms: Sequence[str], inputs: Sequence[str],
+           refine: bool) -> IdentifiedModel:
+    """SINDYc on the model's own terms plus the effects' terms (threshold 0: the terms were chosen already)."""
+    from .identification import SINDYc
+
+    linear_terms = [t for t in model.terms if t not in (*model.states, *model.inputs, "1")]
+    estimator = SINDYc(library="linear", include_constant="1" in model.terms, threshold=0.0,
+                       terms=[*linear_terms, *extra_terms], kinematics=_kinematics(model) or None,
+                       refine="output_error" if refine else None)
+    return estimator.fit(data, states=list(model.states), inputs=list(inputs)).model_
+
+
+def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",
+             max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN, window: int = 10,
+             refine: bool = True) -> DiagnosisReport:
+    """Find the effects `model` lacks in `data`, add them, and report the error before and after.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The model to diagnose (typically linear, from :class:`~cosim.identification.SINDYc`).
+    data : Trajectory
+        Measured data holding the model's states and inputs, at a uniform step.
+    effects : "all", comma-separated names, or a list
+        Which catalogued effects to try.
+    max_effects : int
+        Most effects added.
+    alpha, bic_margin : float
+        A candidate is significant when its p-value is below `alpha` and it lowers BIC by more than
+        `bic_margin`.
+    window : int
+        Samples per window of the integral equation error.
+    refine : bool
+        Refit the final model by output error (slower, unbiased under measurement noise); False refits by
+        the integral equation error only.
+
+    Returns
+    -------
+    DiagnosisReport
+    """
+    names = effect_names(effects)
+    if len(data) < 20 * window:
+        raise DataError(f"diagnosis needs at least {20 * window} samples, got {len(data)}")
+    if not np.allclose(np.diff(data.time), data.dt, rtol=1e-6, atol=0.0):
+        raise DataError("the data's time step is not uniform; resample it onto a uniform grid first")
+    columns = _columns(model, data)
+    for name in model.inputs:
+        if np.ptp(columns[name]) == 0.0:
+            raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
+    res_before = residuals(model, data)
+    before = _figures(model, data, res_before)
+    current, accepted, rounds = model, [], []
+    extra_terms: list[str] = []
+    inputs = list(model.inputs)
+    work = Trajectory.from_arrays(data.time, dict(columns), units=None,
+                                  roles={n: r for n, r in zip(data.names, data.roles, strict=True)})
+    for _ in range(max_effects):
+        screen = _Screen(current, dict(columns), data.dt, window)
+        ranking = []
+        for name in names:
+            effect = EFFECTS[name]
+            if name == "offset" and "1" in current.terms:
+                continue
+            best = None
+            for attachment in effect.attachments(screen.roles):
+                cand = _best_for(screen, effect, attachment, alpha, bic_margin)
+                if cand is not None and cand.rows and (best is None or cand.delta_bic < best.delta_bic):
+                    best = cand
+            if best is not None:
+                ranking.append(best)
+        ranking.sort(key=lambda c: c.delta_bic)
+        rounds.append(tuple(ranking))
+        if not ranking or not ranking[0].significant:
+            break
+        winner = ranking[0]
+        accepted.append(winner)
+        effect = EFFECTS[winner.name]
+        new_cols = effect.columns(Attachment(winner.attached_to, tuple(winner.attached_to.split("-")), winner.rows),
+                                  winner.nuisance, columns)
+        if new_cols:
+            columns.update(new_cols)
+            inputs += list(new_cols)
+            work = Trajectory.from_arrays(data.time, dict(columns),
+                                          roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
+                                                 **dict.fromkeys(new_cols, "input")})
+        extra_terms += [t for t in winner.terms if t not in new_cols]
+        current = _augment(current, winner, list(new_cols))
+    if accepted:
+        final = _refit(model, work, extra_terms, inputs, refine)
+    else:
+        final = model
+    res_after = residuals(final, work) if accepted else res_before
+    after = _figures(final, work, res_after) if accepted else before
+    found = tuple(_final_parameters(c, final) for c in accepted)
+    if found:
+        message = "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
+                  f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
+    elif res_before.white:
+        message = "no effect found: the residual is white, the model explains the data"
+    else:
+        message = ("no effect found: the residual is not white, but no catalogued effect explains it "
+                   "(the model lacks something the catalogue does not cover)")
+    return DiagnosisReport(effects=found, ranking=rounds[0] if rounds else (), rounds=tuple(rounds),
+                           model_before=model, model_after=final, before=before, after=after,
+                           residuals_before=res_before, residuals_after=res_after, message=message, data=work)
+
+
+def _augment(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list[str]) -> IdentifiedModel:
+    """The model with the candidate's terms added (coefficients from the screening) in its rows."""
+    terms = list(model.terms) + [t for t in cand.terms if t not in model.terms]
+    coef = np.zeros((len(model.states), len(terms)))
+    coef[:, :len(model.terms)] = model.coef
+    for row in cand.rows:
+        i = model.states.index(row)
+        for t in cand.terms:
+            coef[i, terms.index(t)] = 1e-12  # marks the term as present in the row for the next screening
+    inputs = tuple(model.inputs) + tuple(new_inputs)
+    return IdentifiedModel(states=model.states, inputs=inputs, terms=tuple(terms), coef=coef, dt=model.dt)
+
+
+def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCandidate:
+    """The candidate with parameters (and standard errors) from the final model's coefficients."""
+    effect = EFFECTS[cand.name]
+    roles = Roles.of(model)
+    coef, se = {}, {}
+    std = model.meta.get("refinement", {}).get("std_error") if isinstance(model.meta, Mapping) else None
+    for row in cand.rows:
+        i = model.states.index(row)
+        idx = [model.terms.index(t) for t in cand.terms if t in model.terms]
+        if not idx:
+            continue
+        coef[row] = model.coef[i, idx]
+        if std is not None:
+            se[row] = np.asarray(std)[i, idx]
+    if not coef:
+        return cand
+    attachment = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")), cand.rows)
+    params = effect.parameters(coef, cand.nuisance, roles, attachment)
+    unc = _uncertainty(effect, coef, se, cand.nuisance, roles) if se else cand.uncertainty
+    return EffectCandidate(cand.name, cand.attached_to, cand.rows, cand.nuisance, cand.terms, cand.delta_bic,
+                           cand.p_value, cand.explained, cand.significant, parameters=params, uncertainty=unc,
+                           meaning=cand.meaning)
