@@ -3,11 +3,12 @@
 ``diagnose(model, data)`` does, round after round:
 
 1. **Screen** every catalogued effect (:mod:`cosim.effects`) at every place it can attach (found from the
-   model's equations) and over its nuisance grid, on the **integral equation error**: over disjoint windows of
-   `window` samples, ``x[b] - x[a] = sum_j c_j * integral of term_j`` (trapezoidal, inputs held), which
-   averages the measurement noise that a derivative would amplify. Each dynamic row is refitted with the
-   candidate's terms added to the row's present terms (so a candidate that only repeats a present term
-   explains nothing); the candidate enters the rows where it lowers BIC.
+   model's equations) and over its nuisance grid, on the **output error**: a Gauss-Newton score test along
+   the model's free run (:mod:`cosim.screening`), with every present coefficient and the initial state
+   re-estimated alongside, so a candidate that only repeats a present term explains nothing. The equation
+   error cannot do this on noisy positions: a stiff coupling turns their noise into equation error larger
+   than a friction force. A candidate enters one dynamic row, or several when that pays by more than the BIC
+   margin.
 2. **Rank** the candidates by the change of BIC (Gaussian likelihood per row), and test each with the
    likelihood-ratio statistic against chi-square (its p-value). A candidate is **significant** when its p-value
    is below `alpha`, it lowers BIC by more than `bic_margin`, *and* it moves the row by at least `min_size`
@@ -17,8 +18,8 @@
 3. **Refine** the winner's nuisance parameter by a bounded scalar search around its best grid value, **add**
    its terms to the model's library, and go to the next round while a significant effect remains (at most
    `max_effects`).
-4. **Refit** the model with every accepted effect by SINDYc with output-error refinement (unbiased under
-   measurement noise), and **report** the free-run error before and after (R², NRMSE fit %, maximum deviation,
+4. **Refit** after each accepted effect by output error (Gauss-Newton on the same sensitivities; unbiased
+   under measurement noise), and **report** the free-run error before and after (R², NRMSE fit %, maximum deviation,
    residual whiteness), each effect's physical parameters with their standard errors (from the output-error
    Jacobian, through the row's input gain), and plots of the evidence.
 
@@ -39,7 +40,7 @@ Examples
 >>> data = Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, roles={"x": "state", "v": "state", "u": "input"})
 >>> linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u"),
 ...                          coef=np.array([[1.0, 0.0], [-2.0, 1.0]]))
->>> report = diagnose(linear, data, refine=False)
+>>> report = diagnose(linear, data)
 >>> [e.name for e in report.effects], round(report.effects[0].parameters["Fc"], 1)
 (['coulomb_friction'], 1.0)
 """
@@ -49,19 +50,19 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
 from .errors import DataError
 from .metrics import max_deviation_pct, nrmse_fit_pct, r2
 from .model import IdentifiedModel
 from .residuals import ResidualAnalysis, residuals
-from .terms import Term
+from .screening import Nuisance, OutputErrorScreen, effect_specs, output_error_fit
 from .trajectory import Trajectory
 
 __all__ = ["DiagnosisReport", "EffectCandidate", "diagnose"]
@@ -117,6 +118,7 @@ class EffectCandidate:
     parameters: dict[str, float] = field(default_factory=dict)
     uncertainty: dict[str, float] = field(default_factory=dict)
     meaning: str = ""
+    coefficients: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "attached_to": self.attached_to, "rows": list(self.rows),
@@ -126,120 +128,25 @@ class EffectCandidate:
 
 
 # ---------------------------------------------------------------------------------------------- the screening
-class _Screen:
-    """Integral-form regressions of each dynamic row, with the model's present terms and a candidate's."""
-
-    def __init__(self, model: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, window: int) -> None:
-        self.model, self.columns, self.dt = model, columns, dt
-        n = len(next(iter(columns.values()))) - 1
-        # disjoint windows [a, a + window], one sample apart: their endpoint noise is independent
-        self.a = np.arange(0, n - window + 1, window + 1)
-        self.b = self.a + window
-        self.n_eq = len(self.a)
-        self.roles = Roles.of(model)
-        self.rows = {}
-        for row in self.roles.dynamic_rows:
-            i = model.states.index(row)
-            present = tuple(t for k, t in enumerate(model.terms) if model.coef[i, k] != 0.0)
-            y = columns[row][self.b] - columns[row][self.a]
-            base = self.integrate(present)
-            rss = self._rss(y, base)
-            self.rows[row] = (y, base, present, rss)
-
-    def integrate(self, terms: Sequence[str]) -> np.ndarray:
-        """Integral of each term over every window (trapezoid with the inputs held at their left sample)."""
-        if not terms:
-            return np.zeros((self.n_eq, 0))
-        now = {k: v[:-1] for k, v in self.columns.items()}
-        nxt = {k: v[1:] for k, v in self.columns.items()}
-        for name in self.model.inputs:  # held over the sample
-            nxt[name] = now[name]
-        for name in self.columns:
-            if name not in self.model.states:
-                nxt[name] = now[name]
-        out = []
-        for text in terms:
-            term = Term(text)
-            f = 0.5 * self.dt * (np.broadcast_to(term.evaluate(now), now[self.model.states[0]].shape) +
-                                 np.broadcast_to(term.evaluate(nxt), now[self.model.states[0]].shape))
-            g = np.concatenate([[0.0], np.cumsum(f)])
-            out.append(g[self.b] - g[self.a])
-        return np.column_stack(out)
-
-    @staticmethod
-    def _rss(y: np.ndarray, design: np.ndarray) -> float:
-        if design.shape[1] == 0:
-            return float(y @ y)
-        scale = np.linalg.norm(design, axis=0)
-        scale[scale == 0] = 1.0
-        coef, *_ = np.linalg.lstsq(design / scale, y, rcond=None)
-        r = y - (design / scale) @ coef
-        return float(r @ r)
-
-    def fit(self, row: str, extra: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        """RSS of the row with `extra` columns, the coefficients of the extra columns, and their std errors."""
-        y, base, _, _ = self.rows[row]
-        design = np.column_stack([base, extra])
-        scale = np.linalg.norm(design, axis=0)
-        scale[scale == 0] = 1.0
-        coef, *_ = np.linalg.lstsq(design / scale, y, rcond=None)
-        r = y - (design / scale) @ coef
-        rss = float(r @ r)
-        dof = max(len(y) - design.shape[1], 1)
-        try:
-            cov = np.linalg.pinv((design / scale).T @ (design / scale)) * rss / dof
-            se = np.sqrt(np.clip(np.diag(cov), 0, None)) / scale
-        except np.linalg.LinAlgError:
-            se = np.full(design.shape[1], math.nan)
-        coef = coef / scale
-        q = extra.shape[1]
-        return rss, coef[-q:], se[-q:]
-
-    def score(self, effect: Effect, attachment: Attachment, value: float | None,
-              alpha: float, bic_margin: float, min_size: float = MIN_SIZE) -> EffectCandidate | None:
-        extra_cols = effect.columns(attachment, value, self.columns)
-        if extra_cols:
-            self.columns.update(extra_cols)
-        terms = effect.terms(attachment, value)
-        try:
-            extra = self.integrate(terms)
-        except (FloatingPointError, ValueError):
-            return None
-        if not np.all(np.isfinite(extra)) or np.allclose(extra, 0.0):
-            return None
-        n = self.n_eq
-        q = extra.shape[1]
-        rows, delta, lr, explained, coef, se, size = [], 0.0, 0.0, {}, {}, {}, 0.0
-        for row in attachment.rows:
-            if row not in self.rows:
-                continue
-            rss0 = self.rows[row][3]
-            rss1, c, s = self.fit(row, extra)
-            if rss0 <= 0 or rss1 <= 0:
-                continue
-            d_bic = n * math.log(rss1 / rss0) + q * math.log(n)
-            if d_bic < 0:
-                rows.append(row)
-                delta += d_bic
-                lr += -n * math.log(rss1 / rss0)
-                explained[row] = 1.0 - rss1 / rss0
-                coef[row], se[row] = c, s
-                # nested least squares: |fit with - fit without|^2 = rss0 - rss1 (collinear terms move little)
-                y = self.rows[row][0]
-                size = max(size, math.sqrt(rss0 - rss1) / max(float(np.linalg.norm(y)), 1e-300))
-        if not rows:
-            return EffectCandidate(effect.name, attachment.label, (), value, terms, 0.0, 1.0, {}, False,
-                                   meaning=effect.meaning)
-        p = float(stats.chi2.sf(lr, q * len(rows)))
-        params = effect.parameters(coef, value, self.roles, Attachment(attachment.label, attachment.signals,
-                                                                        tuple(rows)))
-        return EffectCandidate(effect.name, attachment.label, tuple(rows), value, terms, delta, p, explained,
-                               bool(p < alpha and delta < -bic_margin and size >= min_size), parameters=params,
-                               uncertainty=_uncertainty(effect, coef, se, value, self.roles),
-                               meaning=effect.meaning)
+def _candidate(effect: Effect, attachment: Attachment, value: float | None, terms: tuple[str, ...],
+               rows: tuple[str, ...], score: dict[str, Any], screen: OutputErrorScreen, alpha: float,
+               bic_margin: float, min_size: float) -> EffectCandidate:
+    coef, se = {}, {}
+    if score["coef"] is not None:
+        q = len(terms)
+        for r_i, row in enumerate(rows):
+            coef[row] = score["coef"][r_i * q:(r_i + 1) * q]
+            se[row] = score["se"][r_i * q:(r_i + 1) * q]
+    placed = Attachment(attachment.label, attachment.signals, rows)
+    params = effect.parameters(coef, value, screen.roles, placed) if coef else {}
+    significant = bool(score["p_value"] < alpha and score["delta_bic"] < -bic_margin and score["size"] >= min_size)
+    return EffectCandidate(effect.name, attachment.label, rows, value, terms, score["delta_bic"], score["p_value"],
+                           {"size": score["size"]}, significant, parameters=params,
+                           uncertainty=_uncertainty(coef, se, screen.roles), meaning=effect.meaning,
+                           coefficients=tuple(float(c) for c in score["coef"]) if score["coef"] is not None else ())
 
 
-def _uncertainty(effect: Effect, coef: dict, se: dict, value: float | None, roles: Roles) -> dict[str, float]:
+def _uncertainty(coef: dict, se: dict, roles: Roles) -> dict[str, float]:
     """Standard errors of force-like parameters: the coefficient's, through the row's input gain."""
     out = {}
     for row, s in se.items():
@@ -248,30 +155,75 @@ def _uncertainty(effect: Effect, coef: dict, se: dict, value: float | None, role
     return out
 
 
-def _best_for(screen: _Screen, effect: Effect, attachment: Attachment, alpha: float,
-              bic_margin: float) -> EffectCandidate | None:
-    """The best nuisance value for one effect at one place: the grid, then a bounded search around its best."""
-    grid = effect.grid(attachment, screen.columns)
-    scored = [(c.delta_bic, i, c) for i, v in enumerate(grid)
-              if (c := screen.score(effect, attachment, v, alpha, bic_margin)) is not None]
-    if not scored:
-        return None
-    _, i_best, best = min(scored, key=lambda s: (s[0], s[1]))
-    if effect.nuisance is None or not best.rows or len(grid) < 2:
-        return best
-    if effect.integer:
-        return best  # integer grids (periods, delays) are exhaustive over their range
-    lo = grid[max(i_best - 1, 0)]
-    hi = grid[min(i_best + 1, len(grid) - 1)]
+def _scores(screen: OutputErrorScreen, effect: Effect, attachment: Attachment, values: Sequence[float | None],
+            alpha: float, bic_margin: float, min_size: float) -> list[EffectCandidate]:
+    """The best row choice of the effect at `attachment` for each nuisance value (one batched integration)."""
+    per_value = [(v, effect_specs(effect, attachment, v, screen)) for v in values]
+    flat = [spec for _, specs in per_value for spec in specs]
+    if not flat:
+        return []
+    sens = screen.candidate_sensitivities(flat)
+    out, k = [], 0
+    for v, specs in per_value:
+        best = None
+        for terms, rows in specs:
+            cand = _candidate(effect, attachment, v, terms, rows, screen.test(sens[k]), screen, alpha, bic_margin,
+                              min_size)
+            k += 1
+            # more rows must pay for themselves: the joint placement wins only by more than the BIC margin
+            margin = bic_margin if best is not None and len(rows) > len(best.rows) else 0.0
+            if best is None or cand.delta_bic < best.delta_bic - margin:
+                best = cand
+        if best is not None:
+            out.append(best)
+    return out
+
+
+def _refine(screen: OutputErrorScreen, cand: EffectCandidate, alpha: float, bic_margin: float,
+            min_size: float) -> EffectCandidate:
+    """A bounded scalar search of the nuisance parameter between the grid neighbours of the best value."""
+    effect = EFFECTS[cand.name]
+    if effect.nuisance is None or effect.integer or cand.nuisance is None:
+        return cand
+    attachment = next(a for a in effect.attachments(screen.roles) if a.label == cand.attached_to)
+    grid = [g for g in effect.grid(attachment, screen.columns) if g is not None]
+    i = min(range(len(grid)), key=lambda j: abs(math.log(grid[j] / cand.nuisance)))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    if lo >= hi:
+        return cand
 
     def cost(log_v: float) -> float:
-        c = screen.score(effect, attachment, float(math.exp(log_v)), alpha, bic_margin)
-        return c.delta_bic if c is not None and c.rows else 0.0
+        found = _scores(screen, effect, attachment, [float(math.exp(log_v))], alpha, bic_margin, min_size)
+        return found[0].delta_bic if found else 0.0
 
     res = optimize.minimize_scalar(cost, bounds=(math.log(lo), math.log(hi)), method="bounded",
-                                   options={"xatol": 1e-3})
-    refined = screen.score(effect, attachment, float(math.exp(res.x)), alpha, bic_margin)
-    return refined if refined is not None and refined.delta_bic < best.delta_bic else best
+                                   options={"xatol": 2e-3, "maxiter": 18})
+    found = _scores(screen, effect, attachment, [float(math.exp(res.x))], alpha, bic_margin, min_size)
+    return found[0] if found and found[0].delta_bic < cand.delta_bic else cand
+
+
+def _round(screen: OutputErrorScreen, names: Sequence[str], alpha: float, bic_margin: float, min_size: float,
+           refine_top: int = 3, taken: Sequence[tuple[str, str]] = ()) -> list[EffectCandidate]:
+    """One screening round: each effect's best placement and nuisance value, best first."""
+    ranking = []
+    for name in names:
+        effect = EFFECTS[name]
+        if name == "offset" and "1" in screen.model.terms:
+            continue
+        best = None
+        for attachment in effect.attachments(screen.roles):
+            if (name, attachment.label) in taken:
+                continue
+            values = effect.grid(attachment, screen.columns)
+            for cand in _scores(screen, effect, attachment, values, alpha, bic_margin, min_size):
+                if best is None or cand.delta_bic < best.delta_bic:
+                    best = cand
+        if best is not None and best.rows:
+            ranking.append(best)
+    ranking.sort(key=lambda c: c.delta_bic)
+    ranking[:refine_top] = [_refine(screen, c, alpha, bic_margin, min_size) for c in ranking[:refine_top]]
+    ranking.sort(key=lambda c: c.delta_bic)
+    return ranking
 
 
 # ---------------------------------------------------------------------------------------------- the report
@@ -421,25 +373,23 @@ def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis) ->
             "white": bool(res.white), "status": sim.status, "per_state": per_state}
 
 
+def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajectory:
+    """`traj` plus the derived columns (a delayed input) that it lacks."""
+    extra = {k: v for k, v in columns.items() if k not in traj.names}
+    if not extra:
+        return traj
+    return Trajectory.from_arrays(traj.time, {**{n: traj[n] for n in traj.names}, **extra},
+                                  roles={**dict(zip(traj.names, traj.roles, strict=True)),
+                                         **dict.fromkeys(extra, "input")})
+
+
 def _kinematics(model: IdentifiedModel) -> dict[str, str]:
     return dict(Roles.of(model).velocity_of)
 
 
-def _refit(model: IdentifiedModel, data: Trajectory, extra_terms: Sequence[str], inputs: Sequence[str],
-           refine: bool) -> IdentifiedModel:
-    """SINDYc on the model's own terms plus the effects' terms (threshold 0: the terms were chosen already)."""
-    from .identification import SINDYc
-
-    linear_terms = [t for t in model.terms if t not in (*model.states, *model.inputs, "1")]
-    estimator = SINDYc(library="linear", include_constant="1" in model.terms, threshold=0.0,
-                       terms=[*linear_terms, *extra_terms], kinematics=_kinematics(model) or None,
-                       refine="output_error" if refine else None)
-    return estimator.fit(data, states=list(model.states), inputs=list(inputs)).model_
-
-
 def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",
-             max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN, window: int = 10,
-             refine: bool = True) -> DiagnosisReport:
+             max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN,
+             min_size: float = MIN_SIZE, reference: Trajectory | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
@@ -455,19 +405,18 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     alpha, bic_margin : float
         A candidate is significant when its p-value is below `alpha` and it lowers BIC by more than
         `bic_margin`.
-    window : int
-        Samples per window of the integral equation error.
-    refine : bool
-        Refit the final model by output error (slower, unbiased under measurement noise); False refits by
-        the integral equation error only.
-
+    min_size : float
+        Least size of a significant effect: how much of the data's spread its free-run correction moves.
+    reference : Trajectory, optional
+        Noise-free truth on the same time grid (a simulation): the before/after figures are then computed
+        against it, as the reference study does, instead of against the noisy data (whose noise is a floor).
     Returns
     -------
     DiagnosisReport
     """
     names = effect_names(effects)
-    if len(data) < 20 * window:
-        raise DataError(f"diagnosis needs at least {20 * window} samples, got {len(data)}")
+    if len(data) < 200:
+        raise DataError(f"diagnosis needs at least 200 samples, got {len(data)}")
     if not np.allclose(np.diff(data.time), data.dt, rtol=1e-6, atol=0.0):
         raise DataError("the data's time step is not uniform; resample it onto a uniform grid first")
     columns = _columns(model, data)
@@ -475,35 +424,27 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         if np.ptp(columns[name]) == 0.0:
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
     res_before = residuals(model, data)
-    before = _figures(model, data, res_before)
+    truth = reference if reference is not None else data
+    before = _figures(model, truth, res_before)
     current, accepted, rounds = model, [], []
     extra_terms: list[str] = []
+    nuisances: list[Nuisance] = []
+    owners: list[int] = []
     inputs = list(model.inputs)
     work = Trajectory.from_arrays(data.time, dict(columns), units=None,
                                   roles={n: r for n, r in zip(data.names, data.roles, strict=True)})
     for _ in range(max_effects):
-        screen = _Screen(current, dict(columns), data.dt, window)
-        ranking = []
-        for name in names:
-            effect = EFFECTS[name]
-            if name == "offset" and "1" in current.terms:
-                continue
-            best = None
-            for attachment in effect.attachments(screen.roles):
-                cand = _best_for(screen, effect, attachment, alpha, bic_margin)
-                if cand is not None and cand.rows and (best is None or cand.delta_bic < best.delta_bic):
-                    best = cand
-            if best is not None:
-                ranking.append(best)
-        ranking.sort(key=lambda c: c.delta_bic)
+        screen = OutputErrorScreen(current, dict(columns), data.dt)
+        ranking = _round(screen, names, alpha, bic_margin, min_size,
+                         taken=[(c.name, c.attached_to) for c in accepted])
         rounds.append(tuple(ranking))
         if not ranking or not ranking[0].significant:
             break
         winner = ranking[0]
         accepted.append(winner)
         effect = EFFECTS[winner.name]
-        new_cols = effect.columns(Attachment(winner.attached_to, tuple(winner.attached_to.split("-")), winner.rows),
-                                  winner.nuisance, columns)
+        signals = tuple(winner.attached_to.split("-")) if winner.attached_to != "constant" else ()
+        new_cols = effect.columns(Attachment(winner.attached_to, signals, winner.rows), winner.nuisance, columns)
         if new_cols:
             columns.update(new_cols)
             inputs += list(new_cols)
@@ -511,13 +452,22 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
                                           roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
                                                  **dict.fromkeys(new_cols, "input")})
         extra_terms += [t for t in winner.terms if t not in new_cols]
-        current = _augment(current, winner, list(new_cols))
-    if accepted:
-        final = _refit(model, work, extra_terms, inputs, refine)
-    else:
-        final = model
-    res_after = residuals(final, work) if accepted else res_before
-    after = _figures(final, work, res_after) if accepted else before
+        current = _with_effect(current, winner, list(new_cols))
+        if effect.nuisance is not None and not effect.integer:
+            placed = Attachment(winner.attached_to, signals, winner.rows)
+            nuisances.append(Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(winner.nuisance)))
+            owners.append(len(accepted) - 1)
+        current, se, nuisances = output_error_fit(current, columns, data.dt, nuisances=nuisances)
+        _write_back(accepted, owners, nuisances)
+        pruned = _prune_rows(current, se, accepted[-1])
+        if pruned is not None:
+            current, accepted[-1] = pruned
+            current, se, nuisances = output_error_fit(current, columns, data.dt, nuisances=nuisances)
+            _write_back(accepted, owners, nuisances)
+    final = current
+    final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
+    res_after = residuals(final, work, x0=final_x0[0] if final_x0 else "estimate") if accepted else res_before
+    after = _figures(final, _with_columns(truth, columns), res_after) if accepted else before
     found = tuple(_final_parameters(c, final) for c in accepted)
     if found:
         message = "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
@@ -532,17 +482,54 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work)
 
 
-def _augment(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list[str]) -> IdentifiedModel:
-    """The model with the candidate's terms added (coefficients from the screening) in its rows."""
+def _with_effect(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list[str]) -> IdentifiedModel:
+    """The model with the candidate's terms in its rows, at the coefficients the screening estimated."""
     terms = list(model.terms) + [t for t in cand.terms if t not in model.terms]
     coef = np.zeros((len(model.states), len(terms)))
     coef[:, :len(model.terms)] = model.coef
+    q = len(cand.terms)
+    for r_i, row in enumerate(cand.rows):
+        i = model.states.index(row)
+        for t_i, term in enumerate(cand.terms):
+            value = cand.coefficients[r_i * q + t_i] if cand.coefficients else 0.0
+            coef[i, terms.index(term)] = value if value != 0.0 else 1e-12
+    meta = {"x0": model.meta["x0"]} if isinstance(model.meta, Mapping) and "x0" in model.meta else {}
+    return IdentifiedModel(states=model.states, inputs=tuple(model.inputs) + tuple(new_inputs), terms=tuple(terms),
+                           coef=coef, dt=model.dt, meta=meta)
+
+
+def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisances: Sequence[Nuisance]) -> None:
+    """Put the fitted nuisance values (and the terms written with them) on the accepted effects."""
+    for j, nu in zip(owners, nuisances, strict=True):
+        accepted[j] = replace(accepted[j], nuisance=nu.value, terms=nu.terms)
+
+
+#: A row keeps an effect's terms only if one of them stands this many standard errors from zero.
+ROW_T_MIN = 10.0
+
+
+def _prune_rows(model: IdentifiedModel, se: np.ndarray, cand: EffectCandidate):
+    """Drop the rows where the effect's coefficients are not clearly non-zero after the fit (None: keep all)."""
+    if len(cand.rows) < 2:
+        return None
+    keep = []
     for row in cand.rows:
         i = model.states.index(row)
-        for t in cand.terms:
-            coef[i, terms.index(t)] = 1e-12  # marks the term as present in the row for the next screening
-    inputs = tuple(model.inputs) + tuple(new_inputs)
-    return IdentifiedModel(states=model.states, inputs=inputs, terms=tuple(terms), coef=coef, dt=model.dt)
+        t = [abs(model.coef[i, model.terms.index(term)]) / max(se[i, model.terms.index(term)], 1e-300)
+             for term in cand.terms if term in model.terms]
+        if t and max(t) >= ROW_T_MIN:
+            keep.append(row)
+    if len(keep) == len(cand.rows) or not keep:
+        return None
+    coef = model.coef.copy()
+    for row in cand.rows:
+        if row not in keep:
+            for term in cand.terms:
+                if term in model.terms:
+                    coef[model.states.index(row), model.terms.index(term)] = 0.0
+    pruned = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
+                             meta=model.meta)
+    return pruned, replace(cand, rows=tuple(keep))
 
 
 def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCandidate:
@@ -563,7 +550,7 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
         return cand
     attachment = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")), cand.rows)
     params = effect.parameters(coef, cand.nuisance, roles, attachment)
-    unc = _uncertainty(effect, coef, se, cand.nuisance, roles) if se else cand.uncertainty
+    unc = _uncertainty(coef, se, roles) if se else cand.uncertainty
     return EffectCandidate(cand.name, cand.attached_to, cand.rows, cand.nuisance, cand.terms, cand.delta_bic,
                            cand.p_value, cand.explained, cand.significant, parameters=params, uncertainty=unc,
                            meaning=cand.meaning)
