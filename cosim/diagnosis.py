@@ -55,7 +55,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
 from .errors import DataError
@@ -426,8 +426,8 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     res_before = residuals(model, data)
     truth = reference if reference is not None else data
     before = _figures(model, truth, res_before)
-    current, accepted, rounds = model, [], []
-    extra_terms: list[str] = []
+    # the base at its own output-error optimum, so that a candidate's trial fit gains only what it adds
+    current, accepted, rounds = output_error_fit(model, columns, data.dt)[0], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     inputs = list(model.inputs)
@@ -438,32 +438,25 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         ranking = _round(screen, names, alpha, bic_margin, min_size,
                          taken=[(c.name, c.attached_to) for c in accepted])
         rounds.append(tuple(ranking))
-        if not ranking or not ranking[0].significant:
+        # the score test is a first-order guide; the leading candidates are fitted for real and judged on
+        # the actual drop of the output error (a large model error makes the first order unreliable)
+        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size)
+                  for c in ranking[:VERIFY_TOP] if c.significant]
+        trials = [t for t in trials if t is not None and t.candidate.significant]
+        if not trials:
             break
-        winner = ranking[0]
-        accepted.append(winner)
-        effect = EFFECTS[winner.name]
-        signals = tuple(winner.attached_to.split("-")) if winner.attached_to != "constant" else ()
-        new_cols = effect.columns(Attachment(winner.attached_to, signals, winner.rows), winner.nuisance, columns)
-        if new_cols:
-            columns.update(new_cols)
-            inputs += list(new_cols)
+        best = min(trials, key=lambda t: t.candidate.delta_bic)
+        accepted.append(best.candidate)
+        if best.nuisance is not None:
+            owners.append(len(accepted) - 1)
+        current, nuisances = best.model, best.nuisances
+        _write_back(accepted, owners, nuisances)
+        if best.new_columns:
+            columns.update(best.new_columns)
+            inputs += list(best.new_columns)
             work = Trajectory.from_arrays(data.time, dict(columns),
                                           roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
-                                                 **dict.fromkeys(new_cols, "input")})
-        extra_terms += [t for t in winner.terms if t not in new_cols]
-        current = _with_effect(current, winner, list(new_cols))
-        if effect.nuisance is not None and not effect.integer:
-            placed = Attachment(winner.attached_to, signals, winner.rows)
-            nuisances.append(Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(winner.nuisance)))
-            owners.append(len(accepted) - 1)
-        current, se, nuisances = output_error_fit(current, columns, data.dt, nuisances=nuisances)
-        _write_back(accepted, owners, nuisances)
-        pruned = _prune_rows(current, se, accepted[-1])
-        if pruned is not None:
-            current, accepted[-1] = pruned
-            current, se, nuisances = output_error_fit(current, columns, data.dt, nuisances=nuisances)
-            _write_back(accepted, owners, nuisances)
+                                                 **dict.fromkeys(best.new_columns, "input")})
     final = current
     final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
     res_after = residuals(final, work, x0=final_x0[0] if final_x0 else "estimate") if accepted else res_before
@@ -502,6 +495,61 @@ def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisance
     """Put the fitted nuisance values (and the terms written with them) on the accepted effects."""
     for j, nu in zip(owners, nuisances, strict=True):
         accepted[j] = replace(accepted[j], nuisance=nu.value, terms=nu.terms)
+
+
+#: How many of a round's leading candidates are fitted for real before one is accepted.
+VERIFY_TOP = 6
+
+
+@dataclass
+class _Trial:
+    candidate: EffectCandidate
+    model: IdentifiedModel
+    nuisances: list[Nuisance]
+    nuisance: Nuisance | None
+    new_columns: dict[str, np.ndarray]
+
+
+def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
+              nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
+              min_size: float) -> _Trial | None:
+    """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
+    effect = EFFECTS[cand.name]
+    signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
+    placed = Attachment(cand.attached_to, signals, cand.rows)
+    new_cols = effect.columns(placed, cand.nuisance, columns)
+    cols = {**columns, **new_cols}
+    trial = _with_effect(current, cand, list(new_cols))
+    nuis = list(nuisances)
+    own = None
+    if effect.nuisance is not None and not effect.integer:
+        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
+        nuis.append(own)
+    try:
+        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis)
+        if own is not None:
+            cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
+        pruned = _prune_rows(model, se, cand)
+        if pruned is not None:
+            model, cand = pruned
+            model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis)
+            if own is not None:
+                cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
+    except DataError:
+        return None
+    cost0 = float(screen.residual @ screen.residual)
+    cost1 = float(model.meta["refinement"]["cost"])
+    q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+    n_obs = screen.n_obs
+    if cost1 >= cost0:
+        return None
+    delta_bic = n_obs * math.log(cost1 / cost0) + q * math.log(n_obs)
+    variance = cost1 / max(n_obs - screen.base.shape[1] - q, 1)
+    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
+    size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
+    cand = replace(cand, delta_bic=delta_bic, p_value=p_value, explained={"size": size},
+                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size))
+    return _Trial(cand, model, nuis, own, new_cols)
 
 
 #: A row keeps an effect's terms only if one of them stands this many standard errors from zero.
