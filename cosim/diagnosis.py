@@ -440,12 +440,14 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         rounds.append(tuple(ranking))
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
-        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size)
-                  for c in ranking[:VERIFY_TOP] if c.significant]
+        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size,
+                            iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
         trials = [t for t in trials if t is not None and t.candidate.significant]
         if not trials:
             break
         best = min(trials, key=lambda t: t.candidate.delta_bic)
+        best = _fit_with(current, best.candidate, columns, data.dt, nuisances, screen, alpha, bic_margin,
+                         min_size) or best  # the winner, fitted to convergence
         accepted.append(best.candidate)
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
@@ -499,6 +501,8 @@ def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisance
 
 #: How many of a round's leading candidates are fitted for real before one is accepted.
 VERIFY_TOP = 6
+#: Gauss-Newton iterations of a trial fit (the winner is then fitted to convergence).
+TRIAL_ITERATIONS = 4
 
 
 @dataclass
@@ -512,7 +516,7 @@ class _Trial:
 
 def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
-              min_size: float) -> _Trial | None:
+              min_size: float, iterations: int = 15) -> _Trial | None:
     """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
     effect = EFFECTS[cand.name]
     signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
@@ -526,7 +530,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
         nuis.append(own)
     try:
-        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis)
+        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations)
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
         pruned = _prune_rows(model, se, cand)

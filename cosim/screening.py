@@ -257,12 +257,7 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
         accepted = False
         for _halving in range(8):
             trial, start, trial_nuis = _apply(current, screen, step, nuis)
-            try:
-                trial_screen = OutputErrorScreen(trial, columns, dt, x0=start)
-            except DataError:
-                step = step / 2
-                continue
-            trial_cost = float(trial_screen.residual @ trial_screen.residual)
+            trial_cost = _cost(trial, columns, dt, start, screen.sigma)  # a simulation only: cheap
             if trial_cost < cost:
                 accepted = True
                 break
@@ -270,7 +265,8 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
         if not accepted:
             break
         improvement = (cost - trial_cost) / max(cost, 1e-300)
-        current, screen, cost, nuis = trial, trial_screen, trial_cost, trial_nuis
+        current, cost, nuis = trial, trial_cost, trial_nuis
+        screen = OutputErrorScreen(current, columns, dt, x0=start)
         if improvement < tolerance:
             break
     cov = np.linalg.pinv(screen.base.T @ screen.base) * screen.variance
@@ -284,6 +280,19 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     fitted = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=current.coef,
                              dt=current.dt, meta=meta)
     return fitted, se, nuis
+
+
+def _cost(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: np.ndarray,
+          sigma: np.ndarray) -> float:
+    """Scaled free-run cost of `model` from `x0` (inf if it diverges)."""
+    X = np.column_stack([np.asarray(columns[s], dtype=float) for s in model.states])
+    U = np.column_stack([np.asarray(columns[u], dtype=float) for u in model.inputs]) if model.inputs \
+        else np.zeros((len(X), 0))
+    sim = model.simulate(x0, U[:-1], dt=dt)
+    if not sim.ok:
+        return math.inf
+    r = (X - sim.states) / sigma
+    return float(np.sum(r * r))
 
 
 def _nuisance_columns(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance]) -> list:
