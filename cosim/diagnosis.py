@@ -539,7 +539,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
             model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis)
             if own is not None:
                 cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
-    except DataError:
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
         return None
     cost0 = float(screen.residual @ screen.residual)
     cost1 = float(model.meta["refinement"]["cost"])

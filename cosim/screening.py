@@ -82,6 +82,8 @@ class OutputErrorScreen:
         self.scale_y = float(np.linalg.norm(((X - X.mean(axis=0)) / self.sigma).reshape(-1)))
         self._prepare_dynamics()
         self.base = self._base_sensitivities(start)
+        if not np.all(np.isfinite(self.base)):
+            raise DataError("the free-run sensitivities overflow: the model is too unstable on these data")
         self.q_base, _ = np.linalg.qr(self.base)
         self.r_perp = self.residual - self.q_base @ (self.q_base.T @ self.residual)
         self.rss0 = float(self.r_perp @ self.r_perp)
@@ -266,7 +268,10 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
             break
         improvement = (cost - trial_cost) / max(cost, 1e-300)
         current, cost, nuis = trial, trial_cost, trial_nuis
-        screen = OutputErrorScreen(current, columns, dt, x0=start)
+        try:
+            screen = OutputErrorScreen(current, columns, dt, x0=start)
+        except DataError:
+            break
         if improvement < tolerance:
             break
     cov = np.linalg.pinv(screen.base.T @ screen.base) * screen.variance
