@@ -36,8 +36,8 @@ from typing import Any, ClassVar
 import control
 import numpy as np
 
-from cosim.errors import ControllerError, DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
-from cosim.files import write_text_atomic
+from cosim.errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
+from cosim.files import check_file_format, write_text_atomic
 
 __all__ = [
     "CONTROLLER_FORMAT",
@@ -389,13 +389,8 @@ def controller_from_json(data: str | Mapping[str, Any]) -> Controller:
         except json.JSONDecodeError as exc:
             raise DataError(f"controller file is not JSON ({exc.msg} at line {exc.lineno}); "
                             "write it with `cosim design ... -o CTRL.json`") from None
-    if not isinstance(data, Mapping) or data.get("format") != CONTROLLER_FORMAT:
-        found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-        raise DataError(f"not a cosim controller (format {found!r}, expected {CONTROLLER_FORMAT!r}); "
-                        "write one with `cosim design pid|mpc MODEL.json -o CTRL.json`")
-    if not isinstance(data.get("version"), int) or data["version"] > CONTROLLER_VERSION:
-        raise DataError(f"controller file version {data.get('version')!r} is newer than this cosim reads "
-                        f"({CONTROLLER_VERSION}); upgrade cosim")
+    check_file_format(data, CONTROLLER_FORMAT, CONTROLLER_VERSION, what="controller",
+                      hint="write one with `cosim design pid|mpc MODEL.json -o CTRL.json`")
     _import_builtin_kinds()
     kind = data.get("kind")
     cls = _REGISTRY.get(kind) or _class_named(data.get("class"))
@@ -472,11 +467,4 @@ def load_controller(path: str | os.PathLike) -> Controller:
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"cannot read controller file {path}: {exc}") from None
     return controller_from_json(text)
-
-
-def check_finite_output(u: np.ndarray, t: float, who: str) -> np.ndarray:
-    """Raise :class:`~cosim.errors.ControllerError` if a computed input is NaN or infinite."""
-    if not np.all(np.isfinite(u)):
-        raise ControllerError(f"{who} computed a non-finite input {u.tolist()} at t={t:.6g} s")
-    return u
 

@@ -467,6 +467,13 @@ def _limit(text: str | None, option: str) -> float | None:
     return None if text is None else parse_number(text, what=option)
 
 
+def _bounds(u_min: str | None, u_max: str | None) -> tuple[float | None, float | None]:
+    """--u-min and --u-max; a missing --u-min mirrors --u-max."""
+    hi = _limit(u_max, "--u-max")
+    lo = _limit(u_min, "--u-min") if u_min is not None else (-hi if hi is not None else None)
+    return lo, hi
+
+
 def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], list[str]]:
     info = {k: v for k, v in controller.info.items()}
     payload = {"kind": controller.kind, "dt": controller.dt, "inputs": list(controller.inputs),
@@ -511,8 +518,7 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
     from controllers.pid import tune_pid
 
     sys_c, dt, _ = _design_model(model_path, dt_text)
-    hi = _limit(u_max, "--u-max")
-    lo = _limit(u_min, "--u-min") if u_min is not None else (-hi if hi is not None else None)
+    lo, hi = _bounds(u_min, u_max)
     pid = tune_pid(sys_c, dt=dt, input=input_name, output=output_name, velocity=velocity, phase_margin=phase_margin,
                    bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
                    derivative=False if no_derivative else None, u_min=lo, u_max=hi,
@@ -565,8 +571,7 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
     from controllers.mpc import MPC
 
     sys_c, dt, _ = _design_model(model_path, dt_text)
-    hi = _limit(u_max, "--u-max")
-    lo = _limit(u_min, "--u-min") if u_min is not None else (-hi if hi is not None else None)
+    lo, hi = _bounds(u_min, u_max)
     weights = {key: parse_number(text, what=f"--{key.replace('_', '-')}")
                for key, text in (("q", q_text), ("q_rate", q_rate), ("r", r_text), ("r_delta", r_delta)) if text}
     mpc = MPC(sys_c, dt=dt, horizon=horizon, inputs=_names(input_names, "--input") if input_names else None,

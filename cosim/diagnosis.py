@@ -9,15 +9,16 @@
    error cannot do this on noisy positions: a stiff coupling turns their noise into equation error larger
    than a friction force. A candidate enters one dynamic row, or several when that pays by more than the BIC
    margin.
-2. **Rank** the candidates by the change of BIC (Gaussian likelihood per row), and test each with the
-   likelihood-ratio statistic against chi-square (its p-value). A candidate is **significant** when its p-value
-   is below `alpha`, it lowers BIC by more than `bic_margin`, *and* it moves the row by at least `min_size`
-   of the row's own motion (RMS over the windows): the first two are strict because the search tries a few
-   hundred candidates (data without an effect must give "no effect found"), the third because on long or
-   noise-free records a negligible mismatch (discretisation, say) is significant without being physical.
-3. **Refine** the winner's nuisance parameter by a bounded scalar search around its best grid value, **add**
-   its terms to the model's library, and go to the next round while a significant effect remains (at most
-   `max_effects`).
+2. **Rank** the candidates by their change of BIC, refine the leading ones' nuisance parameters by a bounded
+   scalar search, then **fit the leading candidates for real** (Gauss-Newton output error with the nuisance
+   parameter) and judge them on the actual drop of the output error: the first-order score misleads when
+   the model error is large. A candidate is **significant** when its likelihood-ratio p-value is below
+   `alpha`, it lowers BIC by more than `bic_margin`, *and* its correction moves at least `min_size` of the
+   data's spread: the first two are strict because the search tries a few hundred candidates (data without
+   an effect must give "no effect found"), the third because on long or noise-free records a negligible
+   mismatch (discretisation, say) is significant without being physical.
+3. **Add** the best significant one (dropping rows where its coefficient is not clearly non-zero), and go
+   to the next round while a significant effect remains (at most `max_effects`).
 4. **Refit** after each accepted effect by output error (Gauss-Newton on the same sensitivities; unbiased
    under measurement noise), and **report** the free-run error before and after (R², NRMSE fit %, maximum deviation,
    residual whiteness), each effect's physical parameters with their standard errors (from the output-error
@@ -381,10 +382,6 @@ def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajec
     return Trajectory.from_arrays(traj.time, {**{n: traj[n] for n in traj.names}, **extra},
                                   roles={**dict(zip(traj.names, traj.roles, strict=True)),
                                          **dict.fromkeys(extra, "input")})
-
-
-def _kinematics(model: IdentifiedModel) -> dict[str, str]:
-    return dict(Roles.of(model).velocity_of)
 
 
 def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",

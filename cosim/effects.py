@@ -30,8 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -141,8 +140,6 @@ class Effect:
     params: Callable[[dict[str, np.ndarray], float | None, Roles, Attachment], dict[str, float]]
     grid_fractions: tuple[float, ...] = ()
     integer: bool = False
-    notes: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def attachments(self, roles: Roles) -> list[Attachment]:
         """Every place the effect could act in a model with these `roles`."""

@@ -15,10 +15,11 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_output", "write_text_atomic"]
+__all__ = ["atomic_output", "check_file_format", "write_text_atomic"]
 
 
 def _umask() -> int:
@@ -52,3 +53,21 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     with atomic_output(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+def check_file_format(data: Any, fmt: str, version: int, *, what: str, hint: str) -> Mapping[str, Any]:
+    """Check the ``format`` and ``version`` keys of a parsed cosim JSON file; return `data`.
+
+    Raises :class:`~cosim.errors.DataError` "not a cosim <what> ...; <hint>" for another format, and
+    "<what> file version ... is newer than this cosim reads" for a newer version.
+    """
+    from .errors import DataError
+
+    if not isinstance(data, Mapping) or data.get("format") != fmt:
+        found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
+        raise DataError(f"not a cosim {what} (format {found!r}, expected {fmt!r}); {hint}")
+    if not isinstance(data.get("version"), int) or data["version"] > version:
+        noun = what.split()[0]
+        raise DataError(f"{noun} file version {data.get('version')!r} is newer than this cosim reads "
+                        f"({version}); upgrade cosim")
+    return data

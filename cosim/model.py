@@ -35,7 +35,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .errors import DataError, InvalidSettingError
-from .files import write_text_atomic
+from .files import check_file_format, write_text_atomic
 from .terms import Term, compile_rhs
 from .trajectory import Trajectory
 
@@ -300,12 +300,8 @@ class IdentifiedModel:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> IdentifiedModel:
-        if data.get("format") != MODEL_FORMAT:
-            raise DataError(f"not a cosim model (format {data.get('format')!r}, expected {MODEL_FORMAT!r}); "
-                            "save models with IdentifiedModel.save or `cosim identify -o`")
-        if not isinstance(data.get("version"), int) or data["version"] > MODEL_VERSION:
-            raise DataError(f"model file version {data.get('version')!r} is newer than this cosim reads "
-                            f"({MODEL_VERSION}); upgrade cosim")
+        check_file_format(data, MODEL_FORMAT, MODEL_VERSION, what="model",
+                          hint="save models with IdentifiedModel.save or `cosim identify -o`")
         try:
             return cls(states=tuple(data["states"]), inputs=tuple(data["inputs"]), terms=tuple(data["terms"]),
                        coef=np.array(data["coef"], dtype=float), dt=data.get("dt"), units=data.get("units", {}),

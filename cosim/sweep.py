@@ -65,7 +65,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .errors import CosimError, DataError, FmuNotFoundError, InvalidSettingError
-from .files import write_text_atomic
+from .files import check_file_format, write_text_atomic
 
 if TYPE_CHECKING:
     import distributed
@@ -303,13 +303,8 @@ class SweepResult:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SweepResult:
         """Rebuild a result from :meth:`to_dict`'s output."""
-        if not isinstance(data, Mapping) or data.get("format") != SWEEP_FORMAT:
-            found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-            raise DataError(f"not a cosim sweep result (format {found!r}, expected {SWEEP_FORMAT!r}); "
-                            "save sweeps with SweepResult.save or to_json")
-        if not isinstance(data.get("version"), int) or data["version"] > SWEEP_VERSION:
-            raise DataError(f"sweep file version {data.get('version')!r} is newer than this cosim reads "
-                            f"({SWEEP_VERSION}); upgrade cosim")
+        check_file_format(data, SWEEP_FORMAT, SWEEP_VERSION, what="sweep result",
+                          hint="save sweeps with SweepResult.save or to_json")
         try:
             errors = [None if error is None else SweepError(**error) for error in data["errors"]]
             return cls(cases=list(data["cases"]), results=list(data["results"]), errors=errors,
