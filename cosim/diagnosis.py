@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 from scipy import optimize, stats
+from tqdm.auto import tqdm
 
 from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
 from .errors import DataError
@@ -386,7 +387,8 @@ def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajec
 
 def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",
              max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN,
-             min_size: float = MIN_SIZE, reference: Trajectory | None = None) -> DiagnosisReport:
+             min_size: float = MIN_SIZE, reference: Trajectory | None = None,
+             progress: bool | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
@@ -407,6 +409,8 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     reference : Trajectory, optional
         Noise-free truth on the same time grid (a simulation): the before/after figures are then computed
         against it, as the reference study does, instead of against the noisy data (whose noise is a floor).
+    progress : bool or None
+        A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
     Returns
     -------
     DiagnosisReport
@@ -430,11 +434,16 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     inputs = list(model.inputs)
     work = Trajectory.from_arrays(data.time, dict(columns), units=None,
                                   roles={n: r for n, r in zip(data.names, data.roles, strict=True)})
+    bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
+               disable=None if progress is None else not progress)
     for _ in range(max_effects):
+        bar.set_postfix_str("screening")
         screen = OutputErrorScreen(current, dict(columns), data.dt)
         ranking = _round(screen, names, alpha, bic_margin, min_size,
                          taken=[(c.name, c.attached_to) for c in accepted])
         rounds.append(tuple(ranking))
+        bar.set_postfix_str("fitting " + ", ".join(c.name for c in ranking[:VERIFY_TOP] if c.significant))
+        bar.update(1)
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
         trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size,
@@ -456,6 +465,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
             work = Trajectory.from_arrays(data.time, dict(columns),
                                           roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
                                                  **dict.fromkeys(best.new_columns, "input")})
+    bar.close()
     final = current
     final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
     res_after = residuals(final, work, x0=final_x0[0] if final_x0 else "estimate") if accepted else res_before
