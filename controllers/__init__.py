@@ -5,6 +5,8 @@
 * :class:`~controllers.mpc.MPC` - linear MPC solved with casadi (condensed QP), with terminal cost from the
   discrete Riccati equation, input and input-rate bounds, soft state constraints, offset-free tracking
   through a disturbance observer, and warm start.
+* :class:`~controllers.compensation.EffectCompensation` - wraps either one and adds the input that cancels an
+  effect identified by :func:`cosim.diagnosis.diagnose` (Coulomb friction, say), from the measured outputs.
 
 Every controller follows :class:`~controllers.base.Controller`: ``reset()``, ``__call__(t, y) -> u``,
 ``setpoint``, ``save(path)``; :func:`load_controller` reads any kind back.
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 from .base import Controller, ControllerEvent, DesignModel, controller_from_json, controller_kinds, load_controller
 
-_LAZY = {"PID": "pid", "tune_pid": "pid", "MPC": "mpc"}
+_LAZY = {"PID": "pid", "tune_pid": "pid", "MPC": "mpc", "EffectCompensation": "compensation"}
 
 
 def __getattr__(name: str):

@@ -81,7 +81,7 @@ def controller_kinds() -> tuple[str, ...]:
 def _import_builtin_kinds() -> None:
     import importlib
 
-    for module in ("controllers.pid", "controllers.mpc"):
+    for module in ("controllers.pid", "controllers.mpc", "controllers.compensation"):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as exc:  # a kind not written yet is simply not offered

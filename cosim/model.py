@@ -147,6 +147,28 @@ class IdentifiedModel:
         allowed = {"1", *self.states, *self.inputs}
         return all(t in allowed for k, t in enumerate(self.terms) if np.any(self.coef[:, k] != 0.0))
 
+    def linear_part(self) -> IdentifiedModel:
+        """The model without its nonlinear terms: only the constant, state and input terms, same coefficients.
+
+        A model augmented by :func:`cosim.diagnosis.diagnose` keeps the refitted linear dynamics here (no longer
+        biased by the effect it lacked), which a linear controller design needs; the dropped terms are what a
+        model-based compensation (:mod:`controllers.compensation`) adds back. ``meta["linear_part_of"]`` lists
+        the dropped terms.
+
+        Examples
+        --------
+        >>> model = IdentifiedModel(states=("v",), inputs=("u",), terms=("v", "u", "tanh(v/0.001)"),
+        ...                         coef=np.array([[-2.0, 1.0, -0.5]]))
+        >>> model.linear_part().equations(), model.linear_part().meta["linear_part_of"]
+        (["v' = -2 v + 1 u"], ['tanh(v/0.001)'])
+        """
+        allowed = {"1", *self.states, *self.inputs}
+        keep = [k for k, t in enumerate(self.terms) if t in allowed]
+        dropped = [t for k, t in enumerate(self.terms) if t not in allowed and np.any(self.coef[:, k] != 0.0)]
+        return IdentifiedModel(states=self.states, inputs=self.inputs, terms=tuple(self.terms[k] for k in keep),
+                               coef=self.coef[:, keep], dt=self.dt, units=self.units,
+                               meta={**self.meta, "linear_part_of": dropped})
+
     def linear_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``A, B, c`` of ``dx/dt = A x + B u + c`` for a linear model (see :attr:`is_linear`).
 
