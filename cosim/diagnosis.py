@@ -63,6 +63,7 @@ from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
 from .errors import DataError
 from .metrics import max_deviation_pct, nrmse_fit_pct, r2
 from .model import IdentifiedModel
+from .report import Report
 from .residuals import ResidualAnalysis, residuals
 from .screening import Nuisance, OutputErrorScreen, effect_specs, output_error_fit
 from .trajectory import Trajectory
@@ -301,12 +302,33 @@ class DiagnosisReport:
 
     def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis") -> Path:
         """One HTML file: the verdict, the ranking, the parameters, before/after figures and the plots."""
-        from .plots import plot_trajectory
-        from .report import Report
-
         path = Path(path)
-        stem = path.with_suffix("")
         report = Report(title, subtitle=self.message)
+        self.add_to_report(report, path.with_suffix(""))
+        return report.write(path)
+
+    def add_to_report(self, report: Report, stem: str | os.PathLike) -> list[Path]:
+        """Add the diagnosis sections to `report`: the effects with their parameters (± standard error), the
+        error before and after, the first round's candidates, the evidence, the residuals before and after,
+        the free run against the data, and the equations after.
+
+        Parameters
+        ----------
+        report : cosim.report.Report
+            The report to extend (one job's report can hold the diagnosis with its other stages).
+        stem : path-like
+            Path prefix of the PNG files written: ``<stem>_evidence.png``, ``<stem>_residuals_before.png``,
+            ``<stem>_residuals_after.png``, ``<stem>_free_run.png``.
+
+        Returns
+        -------
+        list of Path
+            The PNG files written.
+        """
+        from .plots import plot_trajectory
+
+        stem = Path(stem)
+        pngs: list[Path] = []
         report.add_table("Effects found", [{"rank": i + 1, "effect": e.name, "attached to": e.attached_to,
                                             "rows": ", ".join(e.rows), "meaning": e.meaning,
                                             **{k: float(f"{v:.5g}") for k, v in e.parameters.items()},
@@ -319,20 +341,23 @@ class DiagnosisReport:
         report.add_table("Candidates (first round)", [
             {"effect": c.name, "attached to": c.attached_to, "nuisance": c.nuisance, "delta BIC": round(c.delta_bic, 1),
              "p-value": float(f"{c.p_value:.3g}"), "significant": c.significant} for c in self.ranking])
-        report.add_figure("Evidence", self.plot_evidence(f"{stem}_evidence.png"))
-        report.add_figure("Residuals before", self.residuals_before.plot(f"{stem}_residuals_before.png"))
-        report.add_figure("Residuals after", self.residuals_after.plot(f"{stem}_residuals_after.png"))
+        pngs.append(Path(self.plot_evidence(f"{stem}_evidence.png")))
+        report.add_figure("Evidence", pngs[-1])
+        pngs.append(Path(self.residuals_before.plot(f"{stem}_residuals_before.png")))
+        report.add_figure("Residuals before", pngs[-1])
+        pngs.append(Path(self.residuals_after.plot(f"{stem}_residuals_after.png")))
+        report.add_figure("Residuals after", pngs[-1])
         if self.data is not None:
             sims = []
             for label, model in (("before", self.model_before), ("after", self.model_after)):
                 sim = _free_run(model, self.data)
                 if sim is not None:
                     sims.append((f"model {label}", sim))
-            report.add_figure("Free run against the data",
-                              plot_trajectory(self.data.select(list(self.model_before.states)),
-                                              f"{stem}_free_run.png", label="data", others=sims))
+            pngs.append(Path(plot_trajectory(self.data.select(list(self.model_before.states)), f"{stem}_free_run.png",
+                                             label="data", others=sims)))
+            report.add_figure("Free run against the data", pngs[-1])
         report.add_text("Equations after", "\n\n".join(self.model_after.equations()))
-        return report.write(path)
+        return pngs
 
 
 # ---------------------------------------------------------------------------------------------- helpers
