@@ -17,7 +17,7 @@ from typing import Any
 import click
 import numpy as np
 
-from .errors import CosimError, InvalidSettingError
+from .errors import CosimError, DataError, InvalidSettingError
 from .numbers import parse_number
 
 __all__ = ["main"]
@@ -584,6 +584,10 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
     _emit(as_json, payload, "\n".join(lines))
 
 
+#: Fewest samples :func:`cosim.diagnosis.diagnose` accepts (checked here before a model is identified).
+DIAGNOSE_MIN_SAMPLES = 200
+
+
 @main.command("diagnose")
 @click.argument("data_path", metavar="DATA")
 @click.option("--state", "states", required=True, metavar="A,B,...",
@@ -600,6 +604,8 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
               help="Known rows d(POS)/dt = VEL for the identified model, e.g. theta_m=omega_m,theta_L=omega_L "
                    "(derived velocities are added by themselves). Effects on velocities need them.")
 @click.option("--time", "time_column", default=None, help="Name of the time column (default t, else time).")
+@click.option("--resample", is_flag=True,
+              help="Interpolate a record whose time steps are not uniform onto a uniform grid instead of refusing it.")
 @click.option("--max-effects", default=3, show_default=True, type=click.IntRange(1, 10), help="Most effects added.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
@@ -609,8 +615,8 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
               help='Print {"effects": [{"name", "attached_to", "parameters"}...], "before": {...}, "after": {...}}.')
 @_friendly
 def diagnose_command(data_path: str, states: str, inputs: str, model_path: str | None, effects: str,
-                     derive: str | None, kinematics: str | None, time_column: str | None, max_effects: int,
-                     report_path: str | None, out: str | None, as_json: bool) -> None:
+                     derive: str | None, kinematics: str | None, time_column: str | None, resample: bool,
+                     max_effects: int, report_path: str | None, out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
 
     DATA is a CSV, Parquet or MATLAB .mat file; columns are chosen by name.
@@ -632,8 +638,11 @@ def diagnose_command(data_path: str, states: str, inputs: str, model_path: str |
     derived_names = {f"{p}_dot" for p in derived}
     columns = [n for n in state_names if n not in derived_names] + input_specs
     roles = {**dict.fromkeys(state_names, "state"), **dict.fromkeys(input_names, "input")}
-    data = load_data(data_path, time=time_column, columns=columns, roles=roles, derive=derived)
+    data = load_data(data_path, time=time_column, columns=columns, roles=roles, derive=derived, resample=resample)
     data = data.select([*state_names, *input_names])
+    if len(data) < DIAGNOSE_MIN_SAMPLES:  # before identifying: its own minimum would name a library option
+        raise DataError(f"{Path(data_path).name} has {len(data)} samples; diagnosis needs at least "
+                        f"{DIAGNOSE_MIN_SAMPLES}; use a longer record")
     if model_path:
         model = IdentifiedModel.load(model_path)
     else:

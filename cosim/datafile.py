@@ -416,7 +416,7 @@ def _time_name(path: Path, names: Sequence[str], time: str | None) -> str:
             return name
     wanted = " or ".join(repr(c) for c in candidates)
     raise UnknownVariableError(f"{path.name} has no time variable {wanted}; it has: {_listing(names)}; "
-                               "pass time=<name of the time variable>")
+                               "pass time=<name of the time variable> (--time on the command line)")
 
 
 def _missing(path: Path, names: Sequence[str], columns: Sequence[_Column]) -> None:
@@ -547,7 +547,8 @@ def _uniform_step(path: Path, name: str, t: np.ndarray, resample: bool) -> tuple
     row = int(np.argmax(off)) + 1
     raise DataError(f"time {name!r} of {path.name} is not uniform: the step before row {row} (t={_fmt(t[row])} s) "
                     f"is {_fmt(steps[row - 1])} s against a median step of {_fmt(dt)} s (tolerance "
-                    f"{UNIFORM_RTOL:.1%}); pass resample=True to interpolate onto a uniform grid, or fix the time")
+                    f"{UNIFORM_RTOL:.1%}); pass resample=True (cosim diagnose --resample) to interpolate onto a "
+                    "uniform grid, or fix the time")
 
 
 # ------------------------------------------------------------------------------------------------ entry point
