@@ -160,6 +160,10 @@ class EffectCompensation(Controller):
         self.gains = g
         self._n_inner = len(inner.outputs)
         self._law = _compile_law(outputs, parsed, g)
+        self._p = len(outputs)
+        self._single = len(self.inputs) == 1
+        self._rate = bool(np.any(np.isfinite(self.du_max)))
+        self._lo, self._hi, self._du = float(self.u_min[0]), float(self.u_max[0]), float(self.du_max[0])
         self.compensation = np.zeros(len(self.inputs))
         self._u_prev: np.ndarray | None = None
         self._setpoint = np.array(inner.setpoint, dtype=float)
@@ -234,21 +238,35 @@ class EffectCompensation(Controller):
     def __call__(self, t: float, y: Sequence[float]) -> np.ndarray:
         """The inner controller's input plus the compensation, limited; `y` in :attr:`outputs` order."""
         try:
-            values = [float(v) for v in y]
-        except (TypeError, ValueError):
-            values = []
-        if len(values) != len(self.outputs):
-            raise InvalidSettingError(f"the compensated controller measures {list(self.outputs)}; got y={y!r}")
-        u = np.asarray(self.inner(t, values[:self._n_inner]), dtype=float)
-        comp = np.asarray(self._law(values), dtype=float)
+            if len(y) != self._p:
+                raise ValueError
+            comp = self._law(y)
+        except (TypeError, ValueError, IndexError):
+            raise InvalidSettingError(f"the compensated controller measures {list(self.outputs)}; "
+                                      f"got y={y!r}") from None
+        u = self.inner(t, y[:self._n_inner])
+        if self._single:  # the common case, kept lean: a few µs per call at kHz rates
+            c = comp[0]
+            if c - c != 0.0:
+                raise ControllerError(f"the compensation is not finite at t={t:.6g} s for "
+                                      f"{list(self.outputs)}={list(y)}")
+            total = float(u[0]) + c
+            prev = self._u_prev
+            if prev is not None and self._rate:
+                total = min(max(total, prev - self._du), prev + self._du)
+            total = min(max(total, self._lo), self._hi)
+            self._u_prev = total
+            self.compensation = np.array((c,))
+            return np.array((total,))
+        comp = np.asarray(comp, dtype=float)
         if not np.all(np.isfinite(comp)):
-            raise ControllerError(f"the compensation is not finite at t={t:.6g} s for {list(self.outputs)}={values}")
-        self.compensation = comp
-        total = u + comp
-        if self._u_prev is not None and np.any(np.isfinite(self.du_max)):
+            raise ControllerError(f"the compensation is not finite at t={t:.6g} s for {list(self.outputs)}={list(y)}")
+        total = np.asarray(u, dtype=float) + comp
+        if self._u_prev is not None and self._rate:
             total = np.clip(total, self._u_prev - self.du_max, self._u_prev + self.du_max)
         total = np.clip(total, self.u_min, self.u_max)
         self._u_prev = total
+        self.compensation = comp
         return total
 
     # ------------------------------------------------------------------ files

@@ -786,17 +786,18 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
 def demo(out_dir: str, as_json: bool) -> None:
-    """Run the main job on the bundled servo FMU and write its results (plots, data) to --out.
+    """Run the main job on the bundled servo FMU and write its results (data, models, controllers, plots, one
+    HTML report) to --out: a linear model of friction-laden noisy data, the diagnosis of the friction it lacks,
+    PID and MPC designed on each model and validated on the FMU.
 
     \b
     Example:
       cosim demo --out cosim-demo
     """
-    from .demo import run_demo
+    from .demo import run_demo, summary_lines
 
     result = run_demo(out_dir)
-    text = "\n".join(f"{k}: {v}" for k, v in result.items())
-    _emit(as_json, result, text)
+    _emit(as_json, result, "\n".join(summary_lines(result)))
 
 
 if __name__ == "__main__":  # pragma: no cover
