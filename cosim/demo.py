@@ -401,8 +401,8 @@ def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: 
 
     step = DEMO_SCENARIOS[0]
     summary, rows = {}, []
-    fig, axes = plt.subplots(len(linear), 1, sharex=True, figsize=(9, 2.6 * len(linear) + 0.6), squeeze=False)
-    for ax, (name, entry) in zip(axes[:, 0], linear.items(), strict=True):
+    fig, axes = plt.subplots(len(linear), 2, sharex=True, figsize=(12, 2.6 * len(linear) + 0.6), squeeze=False)
+    for (ax, err), (name, entry) in zip(axes, linear.items(), strict=True):
         on_linear = entry["verdict"].results[0]
         on_diagnosed = closed_loop(entry["controller"], fmu, duration=step.duration, reference=step.reference,
                                    parameters={"Fc": friction}, model=diagnosed_model, t_event=step.at, band=step.band,
@@ -424,9 +424,17 @@ def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: 
         ax.plot(on_diagnosed.model.time, on_diagnosed.model["theta_L"], lw=0.9, ls="-.", label="diagnosed model")
         ax.set_ylabel("theta_L [rad]", fontsize=8)
         ax.set_title(f"{name.upper()} designed on the linear model: the loop and its predictions", fontsize=9)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower right")
+        for label, run, style in (("linear model", on_linear, "-"), ("diagnosed model", on_diagnosed, "-.")):
+            k = min(len(run.model), len(fmu_run))
+            err.plot(fmu_run.time[:k], fmu_run["theta_L"][:k] - run.model["theta_L"][:k], ls=style, lw=0.9,
+                     label=label)
+        err.set_ylabel("FMU - model [rad]", fontsize=8)
+        err.set_title("prediction error of the load angle", fontsize=9)
+        for a in (ax, err):
+            a.grid(alpha=0.3)
+            a.legend(fontsize=8, loc="lower right")
     axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("time [s]")
     fig.tight_layout()
     png = save_figure(fig, out / "model_vs_fmu_loop.png")
     report.add_table("Which model predicts the real loop: model-versus-FMU discrepancy", rows,
