@@ -65,7 +65,14 @@ from .metrics import max_deviation_pct, nrmse_fit_pct, r2
 from .model import IdentifiedModel
 from .report import Report
 from .residuals import ResidualAnalysis, residuals
-from .screening import Nuisance, OutputErrorScreen, effect_specs, output_error_fit
+from .screening import (
+    Nuisance,
+    OutputErrorScreen,
+    correlation_factor,
+    effect_specs,
+    free_run_residual,
+    output_error_fit,
+)
 from .trajectory import Trajectory
 
 __all__ = ["DiagnosisReport", "EffectCandidate", "diagnose"]
@@ -153,8 +160,8 @@ def _uncertainty(coef: dict, se: dict, roles: Roles) -> dict[str, float]:
     """Standard errors of force-like parameters: the coefficient's, through the row's input gain."""
     out = {}
     for row, s in se.items():
-        if row in roles.input_gain and len(s):
-            out[f"{row}"] = float(abs(s[0] / roles.input_gain[row][1]))
+        if roles.gain(row) and len(s):
+            out[f"{row}"] = float(abs(s[0] / roles.gain(row)))
     return out
 
 
@@ -189,7 +196,7 @@ def _refine(screen: OutputErrorScreen, cand: EffectCandidate, alpha: float, bic_
     if effect.nuisance is None or effect.integer or cand.nuisance is None:
         return cand
     attachment = next(a for a in effect.attachments(screen.roles) if a.label == cand.attached_to)
-    grid = [g for g in effect.grid(attachment, screen.columns) if g is not None]
+    grid = [g for g in effect.grid(attachment, screen.free_run) if g is not None]
     i = min(range(len(grid)), key=lambda j: abs(math.log(grid[j] / cand.nuisance)))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     if lo >= hi:
@@ -205,6 +212,25 @@ def _refine(screen: OutputErrorScreen, cand: EffectCandidate, alpha: float, bic_
     return found[0] if found and found[0].delta_bic < cand.delta_bic else cand
 
 
+#: Two placements whose BIC changes differ by less than this (or 0.2 %) are told apart by collocation.
+TIE_BIC = 2.0
+
+
+def _collocated(cand: EffectCandidate, roles: Roles) -> bool:
+    """The effect acts in the equation of the signal it reads (gravity of the load in the load's equation)."""
+    own = roles.velocity_of.get(cand.attached_to, cand.attached_to)
+    return cand.rows == (own,)
+
+
+def _better(cand: EffectCandidate, best: EffectCandidate, roles: Roles) -> bool:
+    """`cand` explains more than `best`; in a tie (two positions a stiff coupling keeps together, whose data
+    cannot tell apart) the collocated placement wins."""
+    tie = max(TIE_BIC, 0.002 * abs(best.delta_bic))
+    if abs(cand.delta_bic - best.delta_bic) < tie and _collocated(cand, roles) != _collocated(best, roles):
+        return _collocated(cand, roles)
+    return cand.delta_bic < best.delta_bic
+
+
 def _round(screen: OutputErrorScreen, names: Sequence[str], alpha: float, bic_margin: float, min_size: float,
            refine_top: int = 3, taken: Sequence[tuple[str, str]] = ()) -> list[EffectCandidate]:
     """One screening round: each effect's best placement and nuisance value, best first."""
@@ -217,9 +243,9 @@ def _round(screen: OutputErrorScreen, names: Sequence[str], alpha: float, bic_ma
         for attachment in effect.attachments(screen.roles):
             if (name, attachment.label) in taken:
                 continue
-            values = effect.grid(attachment, screen.columns)
+            values = effect.grid(attachment, screen.free_run)
             for cand in _scores(screen, effect, attachment, values, alpha, bic_margin, min_size):
-                if best is None or cand.delta_bic < best.delta_bic:
+                if best is None or _better(cand, best, screen.roles):
                     best = cand
         if best is not None and best.rows:
             ranking.append(best)
@@ -463,7 +489,12 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
                disable=None if progress is None else not progress)
     for _ in range(max_effects):
         bar.set_postfix_str("screening")
-        screen = OutputErrorScreen(current, dict(columns), data.dt)
+        try:
+            screen = OutputErrorScreen(current, dict(columns), data.dt)
+        except DataError:
+            if not accepted:
+                raise
+            break  # the model with the effects found so far is too unstable to screen further: report them
         ranking = _round(screen, names, alpha, bic_margin, min_size,
                          taken=[(c.name, c.attached_to) for c in accepted])
         rounds.append(tuple(ranking))
@@ -555,16 +586,24 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     placed = Attachment(cand.attached_to, signals, cand.rows)
     new_cols = effect.columns(placed, cand.nuisance, columns)
     cols = {**columns, **new_cols}
+    fit_terms = effect.fit_terms(placed, cand.nuisance)
+    if fit_terms != cand.terms:  # more terms than the screening's: they start at zero
+        start = dict(zip(cand.terms, np.reshape(cand.coefficients, (len(cand.rows), -1)).T, strict=True)) \
+            if cand.coefficients else {}
+        coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
+        cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
     trial = _with_effect(current, cand, list(new_cols))
     nuis = list(nuisances)
     own = None
-    if effect.nuisance is not None and not effect.integer:
+    if effect.nuisance is not None and not effect.integer and effect.fit_nuisance:
         own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
         nuis.append(own)
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations)
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
+        if effect.physical is not None:
+            model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations)
         pruned = _prune_rows(model, se, cand)
         if pruned is not None:
             model, cand = pruned
@@ -579,13 +618,47 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     n_obs = screen.n_obs
     if cost1 >= cost0:
         return None
-    delta_bic = n_obs * math.log(cost1 / cost0) + q * math.log(n_obs)
-    variance = cost1 / max(n_obs - screen.base.shape[1] - q, 1)
+    # a residual the effect leaves coloured holds fewer independent samples than it has (see correlation_factor)
+    after = free_run_residual(model, cols, dt, model.meta["x0"][0], screen.sigma)
+    factor = correlation_factor(after) if after is not None else 1.0
+    n_eff = n_obs / factor
+    delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
+    variance = factor * cost1 / max(n_obs - screen.base.shape[1] - q, 1)
     p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
     size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
-    cand = replace(cand, delta_bic=delta_bic, p_value=p_value, explained={"size": size},
-                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size))
+    plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
+    cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
+                   explained={"size": size, "plausible": plausible, "correlation_factor": factor,
+                              "factor_before": correlation_factor(screen.residual.reshape(-1, len(model.states)))},
+                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible))
     return _Trial(cand, model, nuis, own, new_cols)
+
+
+def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Effect, placed: Attachment,
+                       cols: dict[str, np.ndarray], dt: float, nuis: list[Nuisance], iterations: int):
+    """Move a nuisance the data pin only through a product (a backlash's width) to its physical value.
+
+    The term is rewritten at the value :attr:`Effect.physical` gives, its coefficients scaled to keep the
+    product, and the model refitted; twice, since the part of the record inside the band changes with it.
+    """
+    se = np.zeros_like(model.coef)
+    for _ in range(2):
+        coef = {row: model.coef[model.states.index(row), [model.terms.index(t) for t in cand.terms]]
+                for row in cand.rows if all(t in model.terms for t in cand.terms)}
+        value = effect.physical(coef, float(cand.nuisance), Roles.of(model), placed) if coef else None
+        if value is None or abs(math.log(value / cand.nuisance)) < 0.01:
+            break
+        terms, matrix = list(model.terms), model.coef.copy()
+        new_terms = effect.terms(placed, value)
+        for old, new in zip(cand.terms, new_terms, strict=True):
+            k = terms.index(old)
+            terms[k] = new
+            matrix[:, k] *= cand.nuisance / value
+        moved = IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=matrix,
+                                dt=model.dt, meta=model.meta)
+        model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations)
+        cand = replace(cand, nuisance=value, terms=new_terms)
+    return model, se, nuis, cand
 
 
 #: A row keeps an effect's terms only if one of them stands this many standard errors from zero.
@@ -634,6 +707,8 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
         return cand
     attachment = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")), cand.rows)
     params = effect.parameters(coef, cand.nuisance, roles, attachment)
+    if "delay_samples" in params and model.dt:
+        params["delay_s"] = params["delay_samples"] * float(model.dt)
     unc = _uncertainty(coef, se, roles) if se else cand.uncertainty
     return EffectCandidate(cand.name, cand.attached_to, cand.rows, cand.nuisance, cand.terms, cand.delta_bic,
                            cand.p_value, cand.explained, cand.significant, parameters=params, uncertainty=unc,

@@ -91,6 +91,12 @@ class OutputErrorScreen:
         self.variance = self.rss0 / dof
         self.n_obs = self.residual.size
 
+    @property
+    def free_run(self) -> dict[str, np.ndarray]:
+        """The data's columns with the states replaced by the model's free run (noise-free: nuisance grids are
+        scaled on it, since the largest measured twist of two noisy positions is mostly noise)."""
+        return self._values(self.x_sim)
+
     # ------------------------------------------------------------------ dynamics along the free run
     def _values(self, x: np.ndarray) -> dict[str, np.ndarray]:
         values = {k: np.asarray(v, dtype=float)[:len(x)] for k, v in self.columns.items()}
@@ -267,11 +273,11 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
         if not accepted:
             break
         improvement = (cost - trial_cost) / max(cost, 1e-300)
-        current, cost, nuis = trial, trial_cost, trial_nuis
         try:
-            screen = OutputErrorScreen(current, columns, dt, x0=start)
-        except DataError:
+            screen = OutputErrorScreen(trial, columns, dt, x0=start)
+        except DataError:  # its sensitivities overflow: stop at the last point that has them
             break
+        current, cost, nuis = trial, trial_cost, trial_nuis
         if improvement < tolerance:
             break
     cov = np.linalg.pinv(screen.base.T @ screen.base) * screen.variance
@@ -287,17 +293,46 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     return fitted, se, nuis
 
 
-def _cost(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: np.ndarray,
-          sigma: np.ndarray) -> float:
-    """Scaled free-run cost of `model` from `x0` (inf if it diverges)."""
+def free_run_residual(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: Sequence[float],
+                      sigma: np.ndarray) -> np.ndarray | None:
+    """Free-run residual of `model` from `x0`, each state scaled by its noise level (None if it diverges)."""
     X = np.column_stack([np.asarray(columns[s], dtype=float) for s in model.states])
     U = np.column_stack([np.asarray(columns[u], dtype=float) for u in model.inputs]) if model.inputs \
         else np.zeros((len(X), 0))
-    sim = model.simulate(x0, U[:-1], dt=dt)
-    if not sim.ok:
-        return math.inf
-    r = (X - sim.states) / sigma
-    return float(np.sum(r * r))
+    sim = model.simulate(np.asarray(x0, dtype=float), U[:-1], dt=dt)
+    return (X - sim.states) / sigma if sim.ok else None
+
+
+def _cost(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: np.ndarray,
+          sigma: np.ndarray) -> float:
+    """Scaled free-run cost of `model` from `x0` (inf if it diverges)."""
+    r = free_run_residual(model, columns, dt, x0, sigma)
+    return math.inf if r is None else float(np.sum(r * r))
+
+
+def correlation_factor(residual: np.ndarray, lags: int = 50) -> float:
+    """How many samples of a residual carry one sample's worth of information: its long-run variance over its
+    variance, ``1 + 2 sum_k (1 - k/(L+1)) rho_k`` (Bartlett weights, L lags), averaged over the columns, at
+    least 1.
+
+    Tests that treat a coloured residual as white overstate their evidence by this factor: a model that
+    leaves a slow, structured error (an effect the catalogue lacks) makes chance correlations look
+    significant. Dividing the sample count by it keeps them honest; after a right effect the residual is
+    white and the factor is about 1.
+    """
+    r = np.atleast_2d(np.asarray(residual, dtype=float).T).T
+    n = r.shape[0]
+    lags = max(1, min(lags, n // 20))
+    weights = 1.0 - np.arange(1, lags + 1) / (lags + 1)
+    factors = []
+    for col in r.T:
+        c = col - col.mean()
+        var = float(c @ c)
+        if var <= 0.0:
+            continue
+        rho = np.array([float(c[k:] @ c[:-k]) / var for k in range(1, lags + 1)])
+        factors.append(1.0 + 2.0 * float(weights @ rho))
+    return max(1.0, float(np.mean(factors))) if factors else 1.0
 
 
 def _nuisance_columns(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance]) -> list:
