@@ -236,9 +236,8 @@ def _diagnosis_stage(report: Report, model: IdentifiedModel, measured: Trajector
     found.model_after.save(out / "model_diagnosed.json")
     lines = [found.message]
     for e in found.effects:
-        se = next(iter(e.uncertainty.values()), None)
-        params = ", ".join(f"{k} = {v:.5g}" + (f" ± {se:.2g}" if se is not None and i == 0 else "")
-                           for i, (k, v) in enumerate(e.parameters.items()))
+        params = ", ".join(f"{k} = {v:.5g}" + (f" ± {e.uncertainty[k]:.2g}" if k in e.uncertainty else "")
+                           for k, v in e.parameters.items())
         lines.append(f"{e.name} on {e.attached_to} ({e.meaning}): {params} (± one standard error)")
     window_s = float(measured.time[-1] - measured.time[0])
     lines.append(f"Searched {window_s:.3g} s of the noisy data ({len(measured)} samples) in {seconds:.1f} s; free-run "

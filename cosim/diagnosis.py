@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 from scipy import optimize, stats
+from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
@@ -70,6 +71,7 @@ from .screening import (
     OutputErrorScreen,
     correlation_factor,
     effect_specs,
+    free_run_cost,
     free_run_residual,
     output_error_fit,
 )
@@ -129,6 +131,7 @@ class EffectCandidate:
     uncertainty: dict[str, float] = field(default_factory=dict)
     meaning: str = ""
     coefficients: tuple[float, ...] = ()
+    nuisance_se: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "attached_to": self.attached_to, "rows": list(self.rows),
@@ -152,16 +155,40 @@ def _candidate(effect: Effect, attachment: Attachment, value: float | None, term
     significant = bool(score["p_value"] < alpha and score["delta_bic"] < -bic_margin and score["size"] >= min_size)
     return EffectCandidate(effect.name, attachment.label, rows, value, terms, score["delta_bic"], score["p_value"],
                            {"size": score["size"]}, significant, parameters=params,
-                           uncertainty=_uncertainty(coef, se, screen.roles), meaning=effect.meaning,
+                           uncertainty=_uncertainty(effect, coef, np.diag(np.concatenate(list(se.values())) ** 2)
+                                                    if se else None, value, screen.roles, placed),
+                           meaning=effect.meaning,
                            coefficients=tuple(float(c) for c in score["coef"]) if score["coef"] is not None else ())
 
 
-def _uncertainty(coef: dict, se: dict, roles: Roles) -> dict[str, float]:
-    """Standard errors of force-like parameters: the coefficient's, through the row's input gain."""
+def _uncertainty(effect: Effect, coef: dict, cov: np.ndarray, value: float | None, roles: Roles,
+                 attachment: Attachment) -> dict[str, float]:
+    """Standard error of each physical parameter, by name, by the delta method: the gradient of the parameter
+    in the effect's coefficients (by differences) and their covariance ``cov`` (rows in ``coef``'s order, terms
+    within). The covariance matters: a delay's two taps are each loose but their centroid is not."""
+    flat = np.concatenate([np.asarray(c, dtype=float) for c in coef.values()])
+    if cov is None or np.shape(cov) != (flat.size, flat.size):
+        return {}
+    base = effect.parameters(coef, value, roles, attachment)
+    grads = {name: np.zeros(flat.size) for name in base}
+    steps = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * 1e-3
+    for k, h in enumerate(steps):
+        if not h > 0.0:
+            continue
+        moved_flat = flat.copy()
+        moved_flat[k] += h
+        moved, at = {}, 0
+        for row, c in coef.items():
+            moved[row] = moved_flat[at:at + len(c)]
+            at += len(c)
+        for name, v in effect.parameters(moved, value, roles, attachment).items():
+            if name in grads and np.isfinite(v) and np.isfinite(base[name]):
+                grads[name][k] = (v - base[name]) / h
     out = {}
-    for row, s in se.items():
-        if roles.gain(row) and len(s):
-            out[f"{row}"] = float(abs(s[0] / roles.gain(row)))
+    for name, g in grads.items():
+        var = float(g @ cov @ g)
+        if var > 0.0:
+            out[name] = math.sqrt(var)
     return out
 
 
@@ -268,7 +295,12 @@ class DiagnosisReport:
     ranking : tuple of EffectCandidate
         The first round's best candidate of every effect, best first.
     rounds : tuple of tuple of EffectCandidate
-        Each round's ranking.
+        Each round's ranking (by the score test).
+    trials : tuple of tuple of EffectCandidate
+        Each round's leading candidates fitted for real, judged on the actual drop of the output error (the
+        best significant one is accepted).
+    steps : tuple of IdentifiedModel
+        The model refitted after each accepted effect (the last is `model_after`).
     model_before, model_after : IdentifiedModel
     before, after : dict
         ``r2``, ``nrmse_pct``, ``max_dev_pct`` (means over the states, and per state under ``per_state``), and
@@ -281,6 +313,8 @@ class DiagnosisReport:
     effects: tuple[EffectCandidate, ...]
     ranking: tuple[EffectCandidate, ...]
     rounds: tuple[tuple[EffectCandidate, ...], ...]
+    trials: tuple[tuple[EffectCandidate, ...], ...]
+    steps: tuple[IdentifiedModel, ...]
     model_before: IdentifiedModel
     model_after: IdentifiedModel
     before: dict[str, Any]
@@ -298,6 +332,9 @@ class DiagnosisReport:
         """JSON form: ``effects`` (ranked, empty when none), ``before``/``after`` with ``nrmse_pct`` and ``r2``."""
         return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
                 "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
+                "trials": [[{"name": c.name, "attached_to": c.attached_to, "delta_bic": c.delta_bic,
+                             "significant": c.significant, "parameters": dict(c.parameters)} for c in round_]
+                           for round_ in self.trials],
                 "equations_after": self.model_after.equations()}
 
     def plot_evidence(self, path: str | os.PathLike) -> Path:
@@ -462,10 +499,21 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         against it, as the reference study does, instead of against the noisy data (whose noise is a floor).
     progress : bool or None
         A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
+
     Returns
     -------
     DiagnosisReport
     """
+    # the work is tall, thin least squares and small matrix products: threaded BLAS only adds overhead
+    # (3x slower on 2 cores)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
+                         min_size=min_size, reference=reference, progress=progress)
+
+
+def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str], max_effects: int,
+              alpha: float, bic_margin: float, min_size: float, reference: Trajectory | None,
+              progress: bool | None) -> DiagnosisReport:
     names = effect_names(effects)
     if len(data) < 200:
         raise DataError(f"diagnosis needs at least 200 samples, got {len(data)}")
@@ -479,7 +527,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     truth = reference if reference is not None else data
     before = _figures(model, truth, res_before)
     # the base at its own output-error optimum, so that a candidate's trial fit gains only what it adds
-    current, accepted, rounds = output_error_fit(model, columns, data.dt)[0], [], []
+    current, accepted, rounds, fitted, steps = output_error_fit(model, columns, data.dt)[0], [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     inputs = list(model.inputs)
@@ -504,6 +552,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         # the actual drop of the output error (a large model error makes the first order unreliable)
         trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size,
                             iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
+        fitted.append(tuple(t.candidate for t in trials if t is not None))
         trials = [t for t in trials if t is not None and t.candidate.significant]
         if not trials:
             break
@@ -514,6 +563,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
         current, nuisances = best.model, best.nuisances
+        steps.append(current)
         _write_back(accepted, owners, nuisances)
         if best.new_columns:
             columns.update(best.new_columns)
@@ -536,6 +586,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
         message = ("no effect found: the residual is not white, but no catalogued effect explains it "
                    "(the model lacks something the catalogue does not cover)")
     return DiagnosisReport(effects=found, ranking=rounds[0] if rounds else (), rounds=tuple(rounds),
+                           trials=tuple(fitted), steps=tuple(steps),
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work)
 
@@ -559,7 +610,7 @@ def _with_effect(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list
 def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisances: Sequence[Nuisance]) -> None:
     """Put the fitted nuisance values (and the terms written with them) on the accepted effects."""
     for j, nu in zip(owners, nuisances, strict=True):
-        accepted[j] = replace(accepted[j], nuisance=nu.value, terms=nu.terms)
+        accepted[j] = replace(accepted[j], nuisance=nu.value, terms=nu.terms, nuisance_se=nu.std_error)
 
 
 #: How many of a round's leading candidates are fitted for real before one is accepted.
@@ -593,6 +644,9 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
         cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
     trial = _with_effect(current, cand, list(new_cols))
+    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma) > float(screen.residual @ screen.residual):
+        # the score's one linear step overshoots (a drifting free run): start the effect from zero instead
+        trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
     nuis = list(nuisances)
     own = None
     if effect.nuisance is not None and not effect.integer and effect.fit_nuisance:
@@ -601,7 +655,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations)
         if own is not None:
-            cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
+            cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
         if effect.physical is not None:
             model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations)
         pruned = _prune_rows(model, se, cand)
@@ -609,7 +663,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
             model, cand = pruned
             model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis)
             if own is not None:
-                cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms)
+                cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
     except (DataError, np.linalg.LinAlgError, FloatingPointError):
         return None
     cost0 = float(screen.residual @ screen.residual)
@@ -693,23 +747,28 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
     """The candidate with parameters (and standard errors) from the final model's coefficients."""
     effect = EFFECTS[cand.name]
     roles = Roles.of(model)
-    coef, se = {}, {}
-    std = model.meta.get("refinement", {}).get("std_error") if isinstance(model.meta, Mapping) else None
+    refinement = model.meta.get("refinement", {}) if isinstance(model.meta, Mapping) else {}
+    order = {(int(i), str(t)): k for k, (i, t) in enumerate(refinement.get("parameters", []))}
+    full = np.asarray(refinement["covariance"]) if "covariance" in refinement else None
+    coef, index = {}, []
     for row in cand.rows:
         i = model.states.index(row)
-        idx = [model.terms.index(t) for t in cand.terms if t in model.terms]
-        if not idx:
+        terms = [t for t in cand.terms if t in model.terms]
+        if not terms:
             continue
-        coef[row] = model.coef[i, idx]
-        if std is not None:
-            se[row] = np.asarray(std)[i, idx]
+        coef[row] = model.coef[i, [model.terms.index(t) for t in terms]]
+        index += [order.get((i, t), -1) for t in terms]
     if not coef:
         return cand
     attachment = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")), cand.rows)
     params = effect.parameters(coef, cand.nuisance, roles, attachment)
     if "delay_samples" in params and model.dt:
         params["delay_s"] = params["delay_samples"] * float(model.dt)
-    unc = _uncertainty(coef, se, roles) if se else cand.uncertainty
-    return EffectCandidate(cand.name, cand.attached_to, cand.rows, cand.nuisance, cand.terms, cand.delta_bic,
-                           cand.p_value, cand.explained, cand.significant, parameters=params, uncertainty=unc,
-                           meaning=cand.meaning)
+    unc = dict(cand.uncertainty)
+    if full is not None and index and min(index) >= 0:
+        unc = _uncertainty(effect, coef, full[np.ix_(index, index)], cand.nuisance, roles, attachment)
+    if "delay_samples" in unc and model.dt:
+        unc["delay_s"] = unc["delay_samples"] * float(model.dt)
+    if cand.nuisance_se and effect.nuisance in params:
+        unc[effect.nuisance] = float(cand.nuisance_se)
+    return replace(cand, parameters=params, uncertainty=unc)

@@ -342,7 +342,8 @@ def _backlash_width(coef, value, roles, attachment):
 
 
 def _backlash_params(coef, value, roles, attachment):
-    out = {"half_width": float(value)}
+    width = _backlash_width(coef, value, roles, attachment)  # the identifiable product, over the stiffness
+    out = {"half_width": float(value) if width is None else width}
     for row, values in coef.items():
         out[f"coef_{row}"] = float(values[0])
         k = roles.stiffness.get(attachment.label, {}).get(row)

@@ -236,6 +236,7 @@ class Nuisance:
 
     make_terms: Callable[[float], tuple[str, ...]]
     value: float
+    std_error: float | None = None  # set by the fit (first order, from the log-scale sensitivity)
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -265,7 +266,7 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
         accepted = False
         for _halving in range(8):
             trial, start, trial_nuis = _apply(current, screen, step, nuis)
-            trial_cost = _cost(trial, columns, dt, start, screen.sigma)  # a simulation only: cheap
+            trial_cost = free_run_cost(trial, columns, dt, start, screen.sigma)  # a simulation only: cheap
             if trial_cost < cost:
                 accepted = True
                 break
@@ -280,14 +281,20 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
         current, cost, nuis = trial, trial_cost, trial_nuis
         if improvement < tolerance:
             break
-    cov = np.linalg.pinv(screen.base.T @ screen.base) * screen.variance
+    jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
+    cov = np.linalg.pinv(jac.T @ jac) * screen.variance
+    first = screen.base.shape[1]
+    nuis = [Nuisance(nu.make_terms, nu.value, nu.value * math.sqrt(max(cov[first + j, first + j], 0.0)))
+            for j, nu in enumerate(nuis)]
     se = np.zeros_like(current.coef)
     for c, (i, term) in enumerate(screen.base_columns):
         se[i, current.terms.index(term)] = math.sqrt(max(cov[c, c], 0.0))
     meta = dict(current.meta) if isinstance(current.meta, Mapping) else {}
     meta.update(x0=[screen.x0.tolist()], refinement={"method": "output_error (Gauss-Newton on free-run "
                                                               "sensitivities)", "cost": cost,
-                                                     "std_error": se.tolist()})
+                                                     "std_error": se.tolist(),
+                                                     "covariance": cov[:first, :first].tolist(),
+                                                     "parameters": [[i, term] for i, term in screen.base_columns]})
     fitted = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=current.coef,
                              dt=current.dt, meta=meta)
     return fitted, se, nuis
@@ -303,7 +310,7 @@ def free_run_residual(model: IdentifiedModel, columns: Mapping[str, np.ndarray],
     return (X - sim.states) / sigma if sim.ok else None
 
 
-def _cost(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: np.ndarray,
+def free_run_cost(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, x0: np.ndarray,
           sigma: np.ndarray) -> float:
     """Scaled free-run cost of `model` from `x0` (inf if it diverges)."""
     r = free_run_residual(model, columns, dt, x0, sigma)

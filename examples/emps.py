@@ -11,8 +11,13 @@ force ``tau = gtau*vir``. This script
    model a plain identification gives), with Coulomb friction, and with asymmetric friction;
 3. scores each by the benchmark's relative force error (train, and cross-test on the test file) and by an
    open-loop simulation from the measured force (RMS position error on the test file);
-4. prints a before/after table (before: the linear model; after: the diagnosis, added later) and asserts the
-   numbers against the published reference and the data's README within the tolerances in ``TOLERANCES``.
+4. asserts the baseline numbers against the published reference and the data's README within the
+   tolerances in ``TOLERANCES``;
+5. **diagnoses** the linear model on the train record (:func:`cosim.diagnosis.diagnose`: which effect it lacks,
+   added and refitted by output error, then the next while it pays) and prints the before/after table:
+   the linear model, the model after each effect found, and the published rigid models; it asserts what
+   :data:`TARGETS` asks (Coulomb friction first, friction asymmetry second, force error at most 4.1 %) and
+   prints the simulation target's verdict.
 
 The benchmark's force error (its eq. 11, IDIM-LS section 3): velocity and acceleration come from ``qm`` by the
 band-pass of robotics practice, a zero-phase Butterworth low-pass (order 4, 100 Hz = 5 x the 20 Hz position-loop
@@ -44,6 +49,7 @@ import numpy as np
 from scipy.signal import decimate
 
 from cosim.datafile import differentiate, load_data
+from cosim.diagnosis import DiagnosisReport, diagnose
 from cosim.errors import CosimError, InvalidSettingError
 from cosim.model import IdentifiedModel
 from cosim.trajectory import Trajectory
@@ -69,6 +75,10 @@ TOLERANCES = {
     "asymmetric": {"M": 0.5, "Fv+": 2.0, "Fc+": 0.3, "Fv-": 2.0, "Fc-": 0.3, "force_error_pct": 0.15},
     "linear": {"Fv": 5.0, "force_error_pct": 1.0, "simulation_rms_mm": 2.0},
 }
+
+
+#: What the diagnosis must show on EMPS: the effects in order, the train force error, the test simulation error.
+TARGETS = {"effects": ("coulomb_friction", "viscous_asymmetry"), "force_error_pct": 4.1, "simulation_rms_mm": 8.0}
 
 
 def default_data_dir() -> Path:
@@ -258,11 +268,7 @@ def baseline(train: Trajectory, test: Trajectory) -> dict[str, dict[str, Any]]:
                           ("asymmetric", {"coulomb": True, "asymmetric": True})):
         coefficients = fit_rigid_model(train, **options)
         model = rigid_model(coefficients, dt=train.dt)
-        out[name] = {**coefficients,
-                     "force_error_pct": force_error_pct(model, train),
-                     "cross_test_force_error_pct": force_error_pct(model, test),
-                     "simulation_rms_mm": simulation_error_mm(model, test),
-                     "simulation_rms_mm_train": simulation_error_mm(model, train)}
+        out[name] = {**coefficients, **scores(model, train, test)}
     return out
 
 
@@ -278,19 +284,66 @@ def check_reference(results: Mapping[str, Mapping[str, float]]) -> list[str]:
     return misses
 
 
-ROWS = (("mass M [kg]", "M"), ("viscous Fv [N s/m]", "Fv"), ("Coulomb Fc [N]", "Fc"), ("offset [N]", "offset"),
+ROWS = (("mass M [kg]", "M"), ("viscous Fv [N s/m]", "Fv"), ("Coulomb Fc [N]", "Fc"),
+        ("viscous asymmetry [N s/m]", "Fv_asym"), ("offset [N]", "offset"),
         ("force error, train [%]", "force_error_pct"), ("force error, cross-test [%]", "cross_test_force_error_pct"),
-        ("simulation RMS, test [mm]", "simulation_rms_mm"))
+        ("simulation RMS, test [mm]", "simulation_rms_mm"), ("simulation RMS, train [mm]", "simulation_rms_mm_train"))
 
 
-def table(before: Mapping[str, float], after: Mapping[str, float] | None = None,
-          reference: Mapping[str, float] | None = None) -> str:
-    """Before/after table: before = the linear model, after = the diagnosed one (blank until given)."""
-    columns = [("before (linear)", before), ("after", after or {}), ("rigid + Coulomb", reference or {})]
-    lines = [f"{'':30}" + "".join(f"{title:>18}" for title, _ in columns)]
+def physical(model: IdentifiedModel) -> dict[str, float]:
+    """Mass, viscous friction, Coulomb friction, viscous asymmetry and offset [N] of a rigid model's ``qm_dot`` row
+    ``qm_dot' = (force - Fv*qd - Fc*tanh|sign(qd) - Fv_asym*|qd| - offset) / M`` (absent terms left out)."""
+    row = model.coef[model.states.index("qm_dot")]
+    coef = dict(zip(model.terms, row, strict=True))
+    mass = 1.0 / coef[FORCE]
+    out = {"M": mass, "Fv": -coef.get("qm_dot", 0.0) * mass, "offset": -coef.get("1", 0.0) * mass}
+    for term, value in coef.items():
+        if term.startswith(("tanh(qm_dot", "sign(qm_dot")):
+            out["Fc"] = -value * mass
+        elif term == "abs(qm_dot)":
+            out["Fv_asym"] = -value * mass
+    return out
+
+
+def scores(model: IdentifiedModel, train: Trajectory, test: Trajectory) -> dict[str, float]:
+    """The benchmark's figures of one model: force errors (train, cross-test) and simulation errors."""
+    return {"force_error_pct": force_error_pct(model, train),
+            "cross_test_force_error_pct": force_error_pct(model, test),
+            "simulation_rms_mm": simulation_error_mm(model, test),
+            "simulation_rms_mm_train": simulation_error_mm(model, train)}
+
+
+def diagnose_emps(train: Trajectory, test: Trajectory, linear: IdentifiedModel, *,
+                  progress: bool | None = None) -> tuple[DiagnosisReport, list[dict[str, Any]]]:
+    """Diagnose the linear model on the train record; the figures of the model after each effect found."""
+    report = diagnose(linear, train.select(list(STATES) + [FORCE]), progress=progress)
+    steps = []
+    for effect, model in zip(report.effects, report.steps, strict=True):
+        steps.append({"effect": effect.name, "attached_to": effect.attached_to, "parameters": effect.parameters,
+                      "equation": model.equations()[1], **physical(model), **scores(model, train, test)})
+    return report, steps
+
+
+def check_targets(report: DiagnosisReport, after: Mapping[str, float]) -> dict[str, bool]:
+    """Each target of :data:`TARGETS`: met or not."""
+    names = tuple(e.name for e in report.effects)
+    return {"coulomb_friction first, then friction asymmetry": names[:2] == TARGETS["effects"],
+            f"force error, train <= {TARGETS['force_error_pct']} %":
+                after["force_error_pct"] <= TARGETS["force_error_pct"],
+            f"simulation RMS, test <= {TARGETS['simulation_rms_mm']} mm":
+                after["simulation_rms_mm"] <= TARGETS["simulation_rms_mm"]}
+
+
+def table(before: Mapping[str, float], steps: Sequence[Mapping[str, Any]] = (),
+          references: Mapping[str, Mapping[str, float]] | None = None) -> str:
+    """Before/after table: the linear model, the model after each effect the diagnosis found, the references."""
+    columns = [("before (linear)", before)]
+    columns += [(f"+ {step['effect']}", step) for step in steps]
+    columns += [(f"ref. {name}", values) for name, values in (references or {}).items()]
+    lines = [f"{'':28}" + "".join(f"{title[:21]:>22}" for title, _ in columns)]
     for label, key in ROWS:
-        cells = [f"{values[key]:18.4g}" if key in values else f"{'-':>18}" for _, values in columns]
-        lines.append(f"{label:30}" + "".join(cells))
+        cells = [f"{values[key]:22.4g}" if key in values else f"{'-':>22}" for _, values in columns]
+        lines.append(f"{label:28}" + "".join(cells))
     return "\n".join(lines)
 
 
@@ -299,6 +352,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
                                      epilog="example: python examples/emps.py --data ../shared/data/emps --json")
     parser.add_argument("--data", type=Path, default=None, help="folder with DATA_EMPS.mat and DATA_EMPS_PULSES.mat")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument("--report", type=Path, default=None, help="write the diagnosis as one HTML file")
     args = parser.parse_args(argv)
     data_dir = args.data if args.data is not None else default_data_dir()
     train, test = load_emps(data_dir)
@@ -306,16 +360,28 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
     misses = check_reference(results)
     if misses:
         raise AssertionError("EMPS baseline off the reference: " + "; ".join(misses))
-    report = {"before": {key: results["linear"][key] for _, key in ROWS if key in results["linear"]},
-              "after": None, "models": results, "reference": REFERENCE, "tolerances": TOLERANCES,
-              "data": str(data_dir)}
+    linear = rigid_model(fit_rigid_model(train, coulomb=False), dt=train.dt)
+    diagnosis, steps = diagnose_emps(train, test, linear, progress=False if args.json else None)
+    before = {**physical(linear), **scores(linear, train, test)}
+    after = steps[-1] if steps else before
+    targets = check_targets(diagnosis, after)
+    if args.report is not None:
+        diagnosis.write_report(args.report, title="EMPS: diagnosis of the linear rigid model")
+    report = {"before": before, "after": after, "steps": steps, "effects": diagnosis.to_dict()["effects"],
+              "message": diagnosis.message, "targets": targets, "models": results, "reference": REFERENCE,
+              "tolerances": TOLERANCES, "data": str(data_dir)}
     if args.json:
-        print(json.dumps(report, indent=1))
+        print(json.dumps(report, indent=1, default=float))
     else:
-        print(table(results["linear"], None, results["coulomb"]))
-        asym = results["asymmetric"]
-        print(f"asymmetric friction: Fv+ {asym['Fv+']:.1f}, Fc+ {asym['Fc+']:.2f}, Fv- {asym['Fv-']:.1f}, "
-              f"Fc- {asym['Fc-']:.2f}; force error {asym['force_error_pct']:.2f} %")
+        print(diagnosis.message)
+        print(table(before, steps, {"Coulomb": results["coulomb"], "asymmetric": results["asymmetric"]}))
+        for target, met in targets.items():
+            print(f"  {'met    ' if met else 'NOT MET'}  {target}")
+    # the targets the diagnosis must meet; the simulation target is reported above, not asserted (see the
+    # README: the published asymmetric model misses it too, 13.1 mm)
+    failed = [t for t, met in targets.items() if not met and not t.startswith("simulation")]
+    if failed:
+        raise AssertionError("EMPS diagnosis: " + "; ".join(failed))
     return report
 
 

@@ -27,7 +27,7 @@ def test_the_diagnosis_finds_the_friction_with_its_size(demo):
     found = [(e["name"], e["attached_to"]) for e in diag["effects"]]
     assert found == [("coulomb_friction", "omega_m")], diag["message"]
     assert diag["effects"][0]["parameters"]["Fc"] == pytest.approx(FRICTION, rel=0.05)
-    assert 0.0 < diag["effects"][0]["uncertainty"]["omega_m"] < 0.05 * FRICTION
+    assert 0.0 < diag["effects"][0]["uncertainty"]["Fc"] < 0.05 * FRICTION
     assert diag["after"]["nrmse_pct"] * 3 <= diag["before"]["nrmse_pct"]
     assert diag["after"]["white"] and not diag["before"]["white"]
     assert any("tanh(omega_m/" in eq for eq in diag["equations_after"])

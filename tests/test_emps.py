@@ -108,13 +108,59 @@ def test_inverse_force_of_the_linear_model_reproduces_the_fit(emps, records, res
     np.testing.assert_allclose(tau, expected, rtol=1e-9, atol=1e-9)
 
 
-def test_script_prints_json_and_asserts_its_numbers(emps, capsys):
-    report = emps["main"](["--data", str(DATA), "--json"])
+@pytest.mark.slow
+def test_script_prints_json_and_asserts_its_numbers(emps, capsys, tmp_path):
+    report = emps["main"](["--data", str(DATA), "--json", "--report", str(tmp_path / "emps.html")])
     printed = json.loads(capsys.readouterr().out)
     assert printed["before"]["Fv"] == pytest.approx(report["before"]["Fv"])
-    assert printed["after"] is None
+    assert [e["name"] for e in printed["effects"]][:2] == ["coulomb_friction", "viscous_asymmetry"]
+    assert printed["after"]["force_error_pct"] <= 4.1 < printed["before"]["force_error_pct"]
+    assert printed["targets"]["force error, train <= 4.1 %"] is True
+    assert "coulomb_friction" in (tmp_path / "emps.html").read_text()
     assert set(printed["models"]) == {"linear", "coulomb", "asymmetric"}
     assert emps["check_reference"](printed["models"]) == []
     broken = json.loads(json.dumps(printed["models"]))
     broken["coulomb"]["force_error_pct"] = 9.0
     assert emps["check_reference"](broken) == ["coulomb force_error_pct: 9, reference 4.08 +- 0.15"]
+
+
+@pytest.fixture(scope="module")
+def diagnosed(emps, records):
+    train, test = records
+    linear = emps["rigid_model"](emps["fit_rigid_model"](train, coulomb=False), dt=train.dt)
+    report, steps = emps["diagnose_emps"](train, test, linear, progress=False)
+    return report, steps, {**emps["physical"](linear), **emps["scores"](linear, train, test)}
+
+
+@pytest.mark.slow
+def test_diagnosis_names_coulomb_then_asymmetry(emps, diagnosed):
+    report, steps, before = diagnosed
+    assert [e.name for e in report.effects][:2] == ["coulomb_friction", "viscous_asymmetry"], report.message
+    assert report.effects[0].attached_to == "qm_dot"
+    # Coulomb friction near the published 20.39 N; the asymmetry has the published sign (Fv+ < Fv-)
+    assert report.effects[0].parameters["Fc"] == pytest.approx(20.39, abs=1.0)
+    assert steps[1]["Fv_asym"] < 0.0
+
+
+@pytest.mark.slow
+def test_diagnosis_beats_the_reference_force_error(emps, diagnosed):
+    report, steps, before = diagnosed
+    after = steps[-1]
+    assert before["force_error_pct"] == pytest.approx(17.0, abs=0.5)
+    assert after["force_error_pct"] <= emps["TARGETS"]["force_error_pct"]
+    assert after["force_error_pct"] < emps["REFERENCE"]["coulomb"]["force_error_pct"]  # 4.08 %
+    assert after["cross_test_force_error_pct"] < before["cross_test_force_error_pct"] / 2
+    # the open-loop simulation of the validation record: better than the linear model's 18.6 mm after each step
+    # (8 mm is met by no model with asymmetric friction, the published one included: 13.1 mm; see the README)
+    for step in steps:
+        assert step["simulation_rms_mm"] < 0.75 * before["simulation_rms_mm"]
+
+
+def test_example_script_refuses_a_missing_folder(tmp_path):
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, str(ROOT / "examples" / "emps.py"), "--data", str(tmp_path)],
+                            capture_output=True, text=True)
+    assert result.returncode != 0
+    assert "Traceback" not in result.stderr and "emps:" in result.stderr
