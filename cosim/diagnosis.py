@@ -299,8 +299,9 @@ class DiagnosisReport:
     trials : tuple of tuple of EffectCandidate
         Each round's leading candidates fitted for real, judged on the actual drop of the output error (the
         best significant one is accepted).
-    steps : tuple of IdentifiedModel
-        The model refitted after each accepted effect (the last is `model_after`).
+    steps : tuple of (tuple of str, IdentifiedModel)
+        After each round, the effects the model holds and the model refitted with them (the last is
+        `model_after`). An effect found earlier is dropped when the one found later makes it redundant.
     model_before, model_after : IdentifiedModel
     before, after : dict
         ``r2``, ``nrmse_pct``, ``max_dev_pct`` (means over the states, and per state under ``per_state``), and
@@ -314,7 +315,7 @@ class DiagnosisReport:
     ranking: tuple[EffectCandidate, ...]
     rounds: tuple[tuple[EffectCandidate, ...], ...]
     trials: tuple[tuple[EffectCandidate, ...], ...]
-    steps: tuple[IdentifiedModel, ...]
+    steps: tuple[tuple[tuple[str, ...], IdentifiedModel], ...]
     model_before: IdentifiedModel
     model_after: IdentifiedModel
     before: dict[str, Any]
@@ -563,14 +564,18 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
         current, nuisances = best.model, best.nuisances
-        steps.append(current)
-        _write_back(accepted, owners, nuisances)
         if best.new_columns:
             columns.update(best.new_columns)
             inputs += list(best.new_columns)
             work = Trajectory.from_arrays(data.time, dict(columns),
                                           roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
                                                  **dict.fromkeys(best.new_columns, "input")})
+        _write_back(accepted, owners, nuisances)
+        # an effect found earlier may have stood in for the one found now: keep it only if it still pays
+        current, accepted, owners, nuisances = _drop_redundant(current, accepted, owners, nuisances, columns,
+                                                              data.dt, alpha, bic_margin, min_size)
+        _write_back(accepted, owners, nuisances)
+        steps.append((tuple(c.name for c in accepted), current))
     bar.close()
     final = current
     final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
@@ -713,6 +718,45 @@ def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Ef
         model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations)
         cand = replace(cand, nuisance=value, terms=new_terms)
     return model, se, nuis, cand
+
+
+def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
+                    nuisances: list[Nuisance], columns: dict[str, np.ndarray], dt: float, alpha: float,
+                    bic_margin: float, min_size: float):
+    """Backward check: each earlier effect is removed and the model refitted; if the removal does not cost a
+    significant rise of the output error (the same test as for adding it), the effect goes."""
+    for j in range(len(accepted) - 2, -1, -1):
+        cand = accepted[j]
+        keep = [k for k in range(len(current.terms)) if current.terms[k] not in cand.terms]
+        own = owners.index(j) if j in owners else None
+        rest = [nu for k, nu in enumerate(nuisances) if k != own]
+        reduced = IdentifiedModel(states=current.states, inputs=current.inputs,
+                                  terms=tuple(current.terms[k] for k in keep), coef=current.coef[:, keep],
+                                  dt=current.dt, meta=current.meta)
+        try:
+            reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40)
+        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+            continue
+        cost_full = float(current.meta["refinement"]["cost"])
+        cost_reduced = float(reduced.meta["refinement"]["cost"])
+        if cost_reduced <= cost_full:
+            pays = False
+        else:
+            screen = OutputErrorScreen(reduced, columns, dt)
+            after = free_run_residual(current, columns, dt, current.meta["x0"][0], screen.sigma)
+            factor = correlation_factor(after) if after is not None else 1.0
+            n_eff = screen.n_obs / factor
+            q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+            delta_bic = n_eff * math.log(cost_full / cost_reduced) + q * math.log(n_eff)
+            variance = factor * cost_full / max(screen.n_obs - screen.base.shape[1] - q, 1)
+            p_value = float(stats.chi2.sf((cost_reduced - cost_full) / variance, q))
+            size = math.sqrt(cost_reduced - cost_full) / max(screen.scale_y, 1e-300)
+            pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
+        if not pays:
+            current, nuisances = reduced, rest
+            accepted = accepted[:j] + accepted[j + 1:]
+            owners = [k - (k > j) for k in owners if k != j]
+    return current, accepted, owners, nuisances
 
 
 #: A row keeps an effect's terms only if one of them stands this many standard errors from zero.

@@ -318,8 +318,8 @@ def diagnose_emps(train: Trajectory, test: Trajectory, linear: IdentifiedModel, 
     """Diagnose the linear model on the train record; the figures of the model after each effect found."""
     report = diagnose(linear, train.select(list(STATES) + [FORCE]), progress=progress)
     steps = []
-    for effect, model in zip(report.effects, report.steps, strict=True):
-        steps.append({"effect": effect.name, "attached_to": effect.attached_to, "parameters": effect.parameters,
+    for names, model in report.steps:
+        steps.append({"effect": names[-1] if names else "(none)", "effects": list(names),
                       "equation": model.equations()[1], **physical(model), **scores(model, train, test)})
     return report, steps
 
