@@ -531,9 +531,6 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
     current, accepted, rounds, fitted, steps = output_error_fit(model, columns, data.dt)[0], [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
-    inputs = list(model.inputs)
-    work = Trajectory.from_arrays(data.time, dict(columns), units=None,
-                                  roles={n: r for n, r in zip(data.names, data.roles, strict=True)})
     bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
                disable=None if progress is None else not progress)
     for _ in range(max_effects):
@@ -564,12 +561,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
         current, nuisances = best.model, best.nuisances
-        if best.new_columns:
-            columns.update(best.new_columns)
-            inputs += list(best.new_columns)
-            work = Trajectory.from_arrays(data.time, dict(columns),
-                                          roles={**{n: r for n, r in zip(data.names, data.roles, strict=True)},
-                                                 **dict.fromkeys(best.new_columns, "input")})
+        columns.update(best.new_columns)  # a delay's delayed input
         _write_back(accepted, owners, nuisances)
         # an effect found earlier may have stood in for the one found now: keep it only if it still pays
         current, accepted, owners, nuisances = _drop_redundant(current, accepted, owners, nuisances, columns,
@@ -577,6 +569,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         _write_back(accepted, owners, nuisances)
         steps.append((tuple(c.name for c in accepted), current))
     bar.close()
+    work = _with_columns(data, columns)  # the data plus the columns an effect added
     final = current
     final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
     res_after = residuals(final, work, x0=final_x0[0] if final_x0 else "estimate") if accepted else res_before
@@ -674,23 +667,30 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     cost0 = float(screen.residual @ screen.residual)
     cost1 = float(model.meta["refinement"]["cost"])
     q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
-    n_obs = screen.n_obs
     if cost1 >= cost0:
         return None
-    # a residual the effect leaves coloured holds fewer independent samples than it has (see correlation_factor)
-    after = free_run_residual(model, cols, dt, model.meta["x0"][0], screen.sigma)
-    factor = correlation_factor(after) if after is not None else 1.0
-    n_eff = n_obs / factor
-    delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
-    variance = factor * cost1 / max(n_obs - screen.base.shape[1] - q, 1)
-    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
-    size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
+    delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q)
     plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
     cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
-                   explained={"size": size, "plausible": plausible, "correlation_factor": factor,
-                              "factor_before": correlation_factor(screen.residual.reshape(-1, len(model.states)))},
+                   explained={"size": size, "plausible": plausible, "correlation_factor": factor},
                    significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible))
     return _Trial(cand, model, nuis, own, new_cols)
+
+
+def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,
+              cost0: float, cost1: float, q: int) -> tuple[float, float, float, float]:
+    """What `q` more parameters bought, from cost `cost0` (the model of `screen`) to `cost1` (`fuller`): the BIC
+    change, the likelihood-ratio p-value, the size (share of the data's spread) and the residual's correlation
+    factor. A residual the fuller model leaves coloured holds fewer independent samples than it has
+    (:func:`~cosim.screening.correlation_factor`): both tests count samples by it."""
+    after = free_run_residual(fuller, cols, dt, fuller.meta["x0"][0], screen.sigma)
+    factor = correlation_factor(after) if after is not None else 1.0
+    n_eff = screen.n_obs / factor
+    delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
+    variance = factor * cost1 / max(screen.n_obs - screen.base.shape[1] - q, 1)
+    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
+    size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
+    return delta_bic, p_value, size, factor
 
 
 def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Effect, placed: Attachment,
@@ -742,15 +742,9 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
         if cost_reduced <= cost_full:
             pays = False
         else:
-            screen = OutputErrorScreen(reduced, columns, dt)
-            after = free_run_residual(current, columns, dt, current.meta["x0"][0], screen.sigma)
-            factor = correlation_factor(after) if after is not None else 1.0
-            n_eff = screen.n_obs / factor
             q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
-            delta_bic = n_eff * math.log(cost_full / cost_reduced) + q * math.log(n_eff)
-            variance = factor * cost_full / max(screen.n_obs - screen.base.shape[1] - q, 1)
-            p_value = float(stats.chi2.sf((cost_reduced - cost_full) / variance, q))
-            size = math.sqrt(cost_reduced - cost_full) / max(screen.scale_y, 1e-300)
+            delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt), current, columns, dt,
+                                                    cost_reduced, cost_full, q)
             pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
         if not pays:
             current, nuisances = reduced, rest
