@@ -607,6 +607,13 @@ DIAGNOSE_MIN_SAMPLES = 200
 @click.option("--resample", is_flag=True,
               help="Interpolate a record whose time steps are not uniform onto a uniform grid instead of refusing it.")
 @click.option("--max-effects", default=3, show_default=True, type=click.IntRange(1, 10), help="Most effects added.")
+@click.option("--x0", "initial_state", type=click.Choice(["estimate", "measured"]), default="estimate",
+              show_default=True,
+              help="The free runs' initial state: estimated in every fit, or held at the first sample (for "
+                   "precisely measured states on a long record of a drifting plant).")
+@click.option("--noise", default=None, metavar="STATE=LEVEL,...",
+              help="A state's noise level, e.g. its sensor's resolution 'qm=5e-6', instead of the estimate from "
+                   "the data.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), default=None,
@@ -616,7 +623,8 @@ DIAGNOSE_MIN_SAMPLES = 200
 @_friendly
 def diagnose_command(data_path: str, states: str, inputs: str, model_path: str | None, effects: str,
                      derive: str | None, kinematics: str | None, time_column: str | None, resample: bool,
-                     max_effects: int, report_path: str | None, out: str | None, as_json: bool) -> None:
+                     max_effects: int, initial_state: str, noise: str | None, report_path: str | None,
+                     out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
 
     DATA is a CSV, Parquet or MATLAB .mat file; columns are chosen by name.
@@ -626,6 +634,8 @@ def diagnose_command(data_path: str, states: str, inputs: str, model_path: str |
       cosim diagnose data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --report diagnosis.html
       cosim diagnose data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --kinematics theta_m=omega_m
       cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --json
+      cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --x0 measured \\
+          --noise qm=5e-6
     """
     from .datafile import load_data
     from .diagnosis import diagnose
@@ -650,7 +660,9 @@ def diagnose_command(data_path: str, states: str, inputs: str, model_path: str |
         known.update(_pairs(tuple(kinematics.split(",")), "--kinematics") if kinematics else {})
         model = SINDYc(library="linear", include_constant=True, threshold=0.0, kinematics=known or None,
                        refine="output_error").fit(data, states=state_names, inputs=input_names).model_
-    report = diagnose(model, data, effects=effects, max_effects=max_effects)
+    levels = {name: parse_number(text, what=f"--noise {name}")
+              for name, text in _pairs(tuple(noise.split(",")), "--noise").items()} if noise else None
+    report = diagnose(model, data, effects=effects, max_effects=max_effects, x0=initial_state, noise=levels)
     payload = report.to_dict()
     if report_path:
         payload["report"] = str(report.write_report(report_path))

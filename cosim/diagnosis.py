@@ -61,7 +61,7 @@ from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
-from .errors import DataError
+from .errors import DataError, InvalidSettingError
 from .metrics import max_deviation_pct, nrmse_fit_pct, r2
 from .model import IdentifiedModel
 from .report import Report
@@ -442,16 +442,55 @@ def _x0(model: IdentifiedModel, data: Trajectory) -> np.ndarray:
     return np.array([data[name][0] for name in model.states])
 
 
+@dataclass(frozen=True)
+class _FitOptions:
+    """How every output-error fit of one diagnosis treats the initial state and the noise levels."""
+
+    estimate_x0: bool
+    noise: Mapping[str, float] | None
+
+    @property
+    def kw(self) -> dict[str, Any]:
+        return {"estimate_x0": self.estimate_x0, "noise": self.noise}
+
+
+def _initial_state(model: IdentifiedModel, data: Trajectory, x0: str | Sequence[float]) -> np.ndarray | None:
+    """The held initial state of `diagnose`'s `x0` (None: estimated)."""
+    if isinstance(x0, str):
+        if x0 not in ("estimate", "measured"):
+            raise InvalidSettingError(f'x0 must be "estimate", "measured" or {len(model.states)} values, got {x0!r}')
+        return None if x0 == "estimate" else np.array([data[name][0] for name in model.states], dtype=float)
+    values = np.asarray(x0, dtype=float).ravel()
+    if values.shape != (len(model.states),) or not np.all(np.isfinite(values)):
+        raise InvalidSettingError(f"x0 must hold {len(model.states)} finite values ({', '.join(model.states)}), "
+                                  f"got {list(x0)}")
+    return values
+
+
+def _noise(model: IdentifiedModel, noise: Mapping[str, float] | None) -> dict[str, float] | None:
+    """`diagnose`'s `noise`, checked: positive levels of the model's states."""
+    if not noise:
+        return None
+    for name, level in noise.items():
+        if name not in model.states:
+            raise InvalidSettingError(f"noise names {name!r}, which is not a state of the model; states are "
+                                      f"{list(model.states)}")
+        if not (math.isfinite(float(level)) and float(level) > 0):
+            raise InvalidSettingError(f"the noise level of {name!r} must be positive, got {level}")
+    return {name: float(level) for name, level in noise.items()}
+
+
 def _free_run(model: IdentifiedModel, data: Trajectory) -> Trajectory | None:
     u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
     sim = model.simulate(_x0(model, data), u[:-1], dt=data.dt, t0=float(data.time[0]))
     return sim.to_trajectory() if sim.ok else None
 
 
-def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis) -> dict[str, Any]:
+def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
+             x0: np.ndarray | None = None) -> dict[str, Any]:
     truth = np.column_stack([data[name] for name in model.states])
     u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
-    sim = model.simulate(_x0(model, data), u[:-1], dt=data.dt)
+    sim = model.simulate(_x0(model, data) if x0 is None else x0, u[:-1], dt=data.dt)
     if not sim.ok:
         return {"r2": None, "nrmse_pct": None, "max_dev_pct": None, "white": False, "status": sim.status,
                 "per_state": {}}
@@ -477,6 +516,7 @@ def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajec
 def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",
              max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN,
              min_size: float = MIN_SIZE, reference: Trajectory | None = None,
+             x0: str | Sequence[float] = "estimate", noise: Mapping[str, float] | None = None,
              progress: bool | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
@@ -498,6 +538,16 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     reference : Trajectory, optional
         Noise-free truth on the same time grid (a simulation): the before/after figures are then computed
         against it, as the reference study does, instead of against the noisy data (whose noise is a floor).
+    x0 : "estimate", "measured", or a sequence of float
+        The free runs' initial state: estimated with the parameters in every fit (MATLAB's
+        ``InitialState='estimate'``; right for noisy states), the data's first sample, or given values. Hold
+        it (``"measured"``) when the states are measured far more precisely than the model can follow them,
+        on a long record of a drifting (integrating) plant: there an estimated initial state absorbs the
+        model's error (on EMPS it lands 3 mm from an encoder reading good to 5 um).
+    noise : dict, optional
+        A state's noise level (the scale of its residual in every fit), e.g. a sensor's resolution, instead
+        of the estimate from the data's second differences (:func:`~cosim.screening.noise_level`), which
+        is far too small on a filtered or interpolated signal.
     progress : bool or None
         A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
 
@@ -509,11 +559,12 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     # (3x slower on 2 cores)
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
-                         min_size=min_size, reference=reference, progress=progress)
+                         min_size=min_size, reference=reference, x0=x0, noise=noise, progress=progress)
 
 
 def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str], max_effects: int,
               alpha: float, bic_margin: float, min_size: float, reference: Trajectory | None,
+              x0: str | Sequence[float], noise: Mapping[str, float] | None,
               progress: bool | None) -> DiagnosisReport:
     names = effect_names(effects)
     if len(data) < 200:
@@ -524,11 +575,14 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
     for name in model.inputs:
         if np.ptp(columns[name]) == 0.0:
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
-    res_before = residuals(model, data)
+    start = _initial_state(model, data, x0)
+    fit = _FitOptions(estimate_x0=start is None, noise=_noise(model, noise))
+    res_before = residuals(model, data, x0="estimate" if start is None else start)
     truth = reference if reference is not None else data
-    before = _figures(model, truth, res_before)
+    before = _figures(model, truth, res_before, start)
     # the base at its own output-error optimum, so that a candidate's trial fit gains only what it adds
-    current, accepted, rounds, fitted, steps = output_error_fit(model, columns, data.dt)[0], [], [], [], []
+    current = output_error_fit(model, columns, data.dt, x0=start, **fit.kw)[0]
+    accepted, rounds, fitted, steps = [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
@@ -536,7 +590,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
     for _ in range(max_effects):
         bar.set_postfix_str("screening")
         try:
-            screen = OutputErrorScreen(current, dict(columns), data.dt)
+            screen = OutputErrorScreen(current, dict(columns), data.dt, **fit.kw)
         except DataError:
             if not accepted:
                 raise
@@ -548,7 +602,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         bar.update(1)
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
-        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size,
+        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                             iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
         fitted.append(tuple(t.candidate for t in trials if t is not None))
         trials = [t for t in trials if t is not None and t.candidate.significant]
@@ -556,7 +610,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
             break
         best = min(trials, key=lambda t: t.candidate.delta_bic)
         best = _fit_with(current, best.candidate, columns, data.dt, nuisances, screen, alpha, bic_margin,
-                         min_size) or best  # the winner, fitted to convergence
+                         min_size, fit) or best  # the winner, fitted to convergence
         accepted.append(best.candidate)
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
@@ -565,7 +619,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         _write_back(accepted, owners, nuisances)
         # an effect found earlier may have stood in for the one found now: keep it only if it still pays
         current, accepted, owners, nuisances = _drop_redundant(current, accepted, owners, nuisances, columns,
-                                                              data.dt, alpha, bic_margin, min_size)
+                                                              data.dt, alpha, bic_margin, min_size, fit)
         _write_back(accepted, owners, nuisances)
         steps.append((tuple(c.name for c in accepted), current))
     bar.close()
@@ -628,7 +682,7 @@ class _Trial:
 
 def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
-              min_size: float, iterations: int = 15) -> _Trial | None:
+              min_size: float, fit: _FitOptions, iterations: int = 15) -> _Trial | None:
     """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
     effect = EFFECTS[cand.name]
     signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
@@ -651,15 +705,15 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
         nuis.append(own)
     try:
-        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations)
+        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
         if effect.physical is not None:
-            model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations)
+            model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations, fit)
         pruned = _prune_rows(model, se, cand)
         if pruned is not None:
             model, cand = pruned
-            model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis)
+            model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis, **fit.kw)
             if own is not None:
                 cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
     except (DataError, np.linalg.LinAlgError, FloatingPointError):
@@ -694,7 +748,8 @@ def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[
 
 
 def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Effect, placed: Attachment,
-                       cols: dict[str, np.ndarray], dt: float, nuis: list[Nuisance], iterations: int):
+                       cols: dict[str, np.ndarray], dt: float, nuis: list[Nuisance], iterations: int,
+                       fit: _FitOptions):
     """Move a nuisance the data pin only through a product (a backlash's width) to its physical value.
 
     The term is rewritten at the value :attr:`Effect.physical` gives, its coefficients scaled to keep the
@@ -715,14 +770,14 @@ def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Ef
             matrix[:, k] *= cand.nuisance / value
         moved = IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=matrix,
                                 dt=model.dt, meta=model.meta)
-        model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations)
+        model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
         cand = replace(cand, nuisance=value, terms=new_terms)
     return model, se, nuis, cand
 
 
 def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
                     nuisances: list[Nuisance], columns: dict[str, np.ndarray], dt: float, alpha: float,
-                    bic_margin: float, min_size: float):
+                    bic_margin: float, min_size: float, fit: _FitOptions):
     """Backward check: each earlier effect is removed and the model refitted; if the removal does not cost a
     significant rise of the output error (the same test as for adding it), the effect goes."""
     for j in range(len(accepted) - 2, -1, -1):
@@ -734,7 +789,7 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
                                   terms=tuple(current.terms[k] for k in keep), coef=current.coef[:, keep],
                                   dt=current.dt, meta=current.meta)
         try:
-            reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40)
+            reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40, **fit.kw)
         except (DataError, np.linalg.LinAlgError, FloatingPointError):
             continue
         cost_full = float(current.meta["refinement"]["cost"])
@@ -743,8 +798,8 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
             pays = False
         else:
             q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
-            delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt), current, columns, dt,
-                                                    cost_reduced, cost_full, q)
+            delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
+                                                    columns, dt, cost_reduced, cost_full, q)
             pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
         if not pays:
             current, nuisances = reduced, rest

@@ -64,10 +64,12 @@ class OutputErrorScreen:
     """Free-run residual of a model on data, its sensitivities, and the score of candidate terms."""
 
     def __init__(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float,
-                 x0: Sequence[float] | None = None) -> None:
+                 x0: Sequence[float] | None = None, *, estimate_x0: bool = True,
+                 noise: Mapping[str, float] | None = None) -> None:
         self.model, self.columns, self.dt = model, dict(columns), float(dt)
+        self.estimate_x0 = bool(estimate_x0)
         self.roles = Roles.of(model)
-        states, n = model.states, len(model.states)
+        states = model.states
         X = np.column_stack([np.asarray(columns[s], dtype=float) for s in states])
         U = np.column_stack([np.asarray(columns[u], dtype=float) for u in model.inputs]) if model.inputs \
             else np.zeros((len(X), 0))
@@ -77,7 +79,8 @@ class OutputErrorScreen:
         if not sim.ok:
             raise DataError(f"the model's free run diverges on these data ({sim.message}); diagnose a stable model")
         self.x_sim, self.U = sim.states, U
-        self.sigma = np.array([noise_level(X[:, i]) for i in range(n)])
+        noise = noise or {}
+        self.sigma = np.array([float(noise[s]) if s in noise else noise_level(X[:, i]) for i, s in enumerate(states)])
         self.residual = ((X - self.x_sim) / self.sigma).reshape(-1)
         self.scale_y = float(np.linalg.norm(((X - X.mean(axis=0)) / self.sigma).reshape(-1)))
         self._prepare_dynamics()
@@ -159,13 +162,14 @@ class OutputErrorScreen:
             cols += [(i, t) for k, t in enumerate(model.terms) if model.coef[i, k] != 0.0]
         self.base_columns, self.x0 = cols, start
         steps = len(self.x_sim) - 1
-        forcing = np.zeros((steps, n, len(cols) + n))
+        n_x0 = n if self.estimate_x0 else 0  # the initial state is estimated too, or held where it is
+        forcing = np.zeros((steps, n, len(cols) + n_x0))
         if cols:
             values = self._term_values([t for _, t in cols])
             for c, (i, _) in enumerate(cols):
                 forcing[:, i, c] = values[:, c]
-        s0 = np.zeros((n, len(cols) + n))
-        s0[:, len(cols):] = np.eye(n)
+        s0 = np.zeros((n, len(cols) + n_x0))
+        s0[:, len(cols):] = np.eye(n)[:, :n_x0]
         return self._flatten(self._integrate(forcing, s0))
 
     # ------------------------------------------------------------------ candidates
@@ -245,7 +249,8 @@ class Nuisance:
 
 def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, *,
                      x0: Sequence[float] | None = None, nuisances: Sequence[Nuisance] = (), iterations: int = 15,
-                     tolerance: float = 1e-7) -> tuple[IdentifiedModel, np.ndarray, list[Nuisance]]:
+                     tolerance: float = 1e-7, estimate_x0: bool = True, noise: Mapping[str, float] | None = None,
+                     ) -> tuple[IdentifiedModel, np.ndarray, list[Nuisance]]:
     """Gauss-Newton output-error fit of the dynamic rows' non-zero coefficients, the initial state, and the
     placed effects' nuisance parameters (on a log scale).
 
@@ -254,11 +259,15 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     difference the whole simulation per parameter). A nuisance parameter's sensitivity is that of its terms'
     central difference in ``log(value)``, weighted by their coefficients. Steps are halved until the cost falls.
 
+    With ``estimate_x0=False`` the initial state stays where it starts (`x0`, else the model's ``meta["x0"]``,
+    else the first sample). `noise` gives a state's noise level (its residual's scale) instead of the estimate
+    from the data's second differences (:func:`noise_level`), e.g. a sensor's known resolution.
+
     Returns the fitted model (its ``meta`` holds ``x0`` and ``std_error``, the coefficients' standard errors
     from the final Jacobian), the standard errors as an array shaped like ``coef``, and the nuisances.
     """
     current, nuis = model, [Nuisance(n.make_terms, n.value) for n in nuisances]
-    screen = OutputErrorScreen(current, columns, dt, x0=x0)
+    screen = OutputErrorScreen(current, columns, dt, x0=x0, estimate_x0=estimate_x0, noise=noise)
     cost = float(screen.residual @ screen.residual)
     for _ in range(iterations):
         jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
@@ -275,7 +284,7 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
             break
         improvement = (cost - trial_cost) / max(cost, 1e-300)
         try:
-            screen = OutputErrorScreen(trial, columns, dt, x0=start)
+            screen = OutputErrorScreen(trial, columns, dt, x0=start, estimate_x0=estimate_x0, noise=noise)
         except DataError:  # its sensitivities overflow: stop at the last point that has them
             break
         current, cost, nuis = trial, trial_cost, trial_nuis
@@ -370,8 +379,8 @@ def _apply(model: IdentifiedModel, screen: OutputErrorScreen, step: np.ndarray,
     nb = len(screen.base_columns)
     for c, (i, term) in enumerate(screen.base_columns):
         coef[i, model.terms.index(term)] += step[c]
-    n = len(model.states)
-    start = screen.x0 + step[nb:nb + n]
+    n = len(model.states) if screen.estimate_x0 else 0
+    start = screen.x0 + step[nb:nb + n] if n else screen.x0
     terms = list(model.terms)
     new_nuis = []
     for j, nu in enumerate(nuis):

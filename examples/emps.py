@@ -16,8 +16,16 @@ force ``tau = gtau*vir``. This script
 5. **diagnoses** the linear model on the train record (:func:`cosim.diagnosis.diagnose`: which effect it lacks,
    added and refitted by output error, then the next while it pays) and prints the before/after table:
    the linear model, the model after each effect found, and the published rigid models; it asserts what
-   :data:`TARGETS` asks (Coulomb friction first, friction asymmetry second, force error at most 4.1 %) and
-   prints the simulation target's verdict.
+   :data:`TARGETS` asks: Coulomb friction first, friction asymmetry second, force error at most 4.1 %, and
+   open-loop simulation of the test file within 8 mm RMS.
+
+The diagnosis holds the free runs' initial state at the measured first sample (``x0="measured"``) and takes the
+encoder's resolution, 5 um, as the noise level of ``qm`` (``noise``). Both because the record is 24 s of an
+integrating axis, measured far more precisely than a rigid model follows it: estimated, the initial state
+absorbs the model's drift (it lands 3 mm from the encoder's first reading), and the noise level estimated from
+``qm``'s second differences (0.03 um: the recorded position is finer than the encoder) makes the position's
+slow drift outweigh the velocity in which friction shows. With the defaults the diagnosis still names Coulomb
+friction then the asymmetry, with a force error of 3.46 %, but the test-file simulation is 12.5 mm.
 
 The benchmark's force error (its eq. 11, IDIM-LS section 3): velocity and acceleration come from ``qm`` by the
 band-pass of robotics practice, a zero-phase Butterworth low-pass (order 4, 100 Hz = 5 x the 20 Hz position-loop
@@ -76,6 +84,9 @@ TOLERANCES = {
     "linear": {"Fv": 5.0, "force_error_pct": 1.0, "simulation_rms_mm": 2.0},
 }
 
+
+#: The encoder's resolution on the load side [m] (the data's README): the noise level of ``qm`` in the diagnosis.
+ENCODER_RESOLUTION = 5e-6
 
 #: What the diagnosis must show on EMPS: the effects in order, the train force error, the test simulation error.
 TARGETS = {"effects": ("coulomb_friction", "viscous_asymmetry"), "force_error_pct": 4.1, "simulation_rms_mm": 8.0}
@@ -316,7 +327,8 @@ def scores(model: IdentifiedModel, train: Trajectory, test: Trajectory) -> dict[
 def diagnose_emps(train: Trajectory, test: Trajectory, linear: IdentifiedModel, *,
                   progress: bool | None = None) -> tuple[DiagnosisReport, list[dict[str, Any]]]:
     """Diagnose the linear model on the train record; the figures of the model after each effect found."""
-    report = diagnose(linear, train.select(list(STATES) + [FORCE]), progress=progress)
+    report = diagnose(linear, train.select(list(STATES) + [FORCE]), x0="measured",
+                      noise={"qm": ENCODER_RESOLUTION}, progress=progress)
     steps = []
     for names, model in report.steps:
         steps.append({"effect": names[-1] if names else "(none)", "effects": list(names),
@@ -377,9 +389,7 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
         print(table(before, steps, {"Coulomb": results["coulomb"], "asymmetric": results["asymmetric"]}))
         for target, met in targets.items():
             print(f"  {'met    ' if met else 'NOT MET'}  {target}")
-    # the targets the diagnosis must meet; the simulation target is reported above, not asserted (see the
-    # README: the published asymmetric model misses it too, 13.1 mm)
-    failed = [t for t, met in targets.items() if not met and not t.startswith("simulation")]
+    failed = [t for t, met in targets.items() if not met]
     if failed:
         raise AssertionError("EMPS diagnosis: " + "; ".join(failed))
     return report

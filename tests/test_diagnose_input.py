@@ -11,31 +11,12 @@ import numpy as np
 import pytest
 import scipy.io
 from click.testing import CliRunner
+from diagnose_fixtures import MODEL, assert_one_line_error, record, write_csv
 
 from cosim.cli import main
 from cosim.datafile import load_data
 from cosim.diagnosis import diagnose
 from cosim.errors import DataError, UnknownVariableError
-from cosim.model import IdentifiedModel
-
-K, C, DT = 20.0, 3.0, 1e-3
-MODEL = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),
-                        coef=np.array([[1.0, 0.0, 0.0], [-C, -K, 1.0]]))
-
-
-def record(n: int, constant: bool = False) -> dict[str, np.ndarray]:
-    """A mass-spring-damper (the model above, exactly) driven by a sine plus a square wave, Euler at DT."""
-    t = np.arange(n) * DT
-    u = np.ones(n) if constant else 3 * np.sin(2 * np.pi * 1.3 * t) + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t))
-    x, v = np.zeros(n), np.zeros(n)
-    for k in range(n - 1):
-        x[k + 1], v[k + 1] = x[k] + DT * v[k], v[k] + DT * (u[k] - C * v[k] - K * x[k])
-    return {"t": t, "x": x, "v": v, "u": u}
-
-
-def write_csv(path, columns: dict[str, np.ndarray]):
-    np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="")
-    return path
 
 
 @pytest.fixture()
@@ -61,16 +42,6 @@ def files(tmp_path):
 
 def cli(*args: str):
     return CliRunner().invoke(main, ["diagnose", *map(str, args)], catch_exceptions=False)
-
-
-def assert_one_line_error(result, *fragments: str) -> None:
-    assert result.exit_code == 1, (result.exit_code, result.output)
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
-    assert "Traceback" not in result.output
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
-    assert result.stdout == ""
 
 
 @pytest.mark.parametrize(("case", "with_model", "fragments"), [

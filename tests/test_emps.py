@@ -115,7 +115,7 @@ def test_script_prints_json_and_asserts_its_numbers(emps, capsys, tmp_path):
     assert printed["before"]["Fv"] == pytest.approx(report["before"]["Fv"])
     assert [e["name"] for e in printed["effects"]][:2] == ["coulomb_friction", "viscous_asymmetry"]
     assert printed["after"]["force_error_pct"] <= 4.1 < printed["before"]["force_error_pct"]
-    assert printed["targets"]["force error, train <= 4.1 %"] is True
+    assert all(printed["targets"].values()), printed["targets"]
     assert "coulomb_friction" in (tmp_path / "emps.html").read_text()
     assert set(printed["models"]) == {"linear", "coulomb", "asymmetric"}
     assert emps["check_reference"](printed["models"]) == []
@@ -137,9 +137,10 @@ def test_diagnosis_names_coulomb_then_asymmetry(emps, diagnosed):
     report, steps, before = diagnosed
     assert [e.name for e in report.effects][:2] == ["coulomb_friction", "viscous_asymmetry"], report.message
     assert report.effects[0].attached_to == "qm_dot"
-    # Coulomb friction near the published 20.39 N; the asymmetry has the published sign (Fv+ < Fv-)
-    assert report.effects[0].parameters["Fc"] == pytest.approx(20.39, abs=1.0)
-    assert steps[1]["Fv_asym"] < 0.0
+    # Coulomb friction within 10 % of the published 20.39 N (an output-error estimate: 21.7 N; the inverse
+    # model's least squares is 20.39); the asymmetry has the published sign and size (Fv+ - Fv- = -73.7 N s/m)
+    assert report.effects[0].parameters["Fc"] == pytest.approx(20.39, rel=0.10)
+    assert steps[1]["Fv_asym"] == pytest.approx(-73.7 / 2, rel=0.25)
 
 
 @pytest.mark.slow
@@ -150,8 +151,10 @@ def test_diagnosis_beats_the_reference_force_error(emps, diagnosed):
     assert after["force_error_pct"] <= emps["TARGETS"]["force_error_pct"]
     assert after["force_error_pct"] < emps["REFERENCE"]["coulomb"]["force_error_pct"]  # 4.08 %
     assert after["cross_test_force_error_pct"] < before["cross_test_force_error_pct"] / 2
-    # the open-loop simulation of the validation record: better than the linear model's 18.6 mm after each step
-    # (8 mm is met by no model with asymmetric friction, the published one included: 13.1 mm; see the README)
+    # the open-loop simulation of the validation record: from the linear model's 18.6 mm to 8 mm or less (the
+    # published asymmetric model: 13.1 mm), and better than the linear model after each step
+    assert before["simulation_rms_mm"] == pytest.approx(18.0, abs=1.0)
+    assert after["simulation_rms_mm"] <= emps["TARGETS"]["simulation_rms_mm"]
     for step in steps:
         assert step["simulation_rms_mm"] < 0.75 * before["simulation_rms_mm"]
 
