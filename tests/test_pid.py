@@ -106,6 +106,23 @@ def velocity_loop(pid: PID, plant: control.StateSpace, w: np.ndarray) -> np.ndar
             + pid.velocity_tf().frequency_response(w).complex.ravel() * omega)
 
 
+def true_plant_margins(pid: PID) -> tuple[np.ndarray, ...]:
+    """All of python-control's stability margins of `pid`'s velocity loop on the true plant (gm, pm, sm, wpc, wgc,
+    wms), on a grid dense around the antiresonance."""
+    w = np.union1d(np.geomspace(1e-2, math.pi / STUDY_DT, 5000), np.linspace(20.0, 150.0, 4001))
+    return tuple(np.atleast_1d(v) for v in control.stability_margins(
+        control.frd(velocity_loop(pid, two_mass(), w), w), returnall=True))
+
+
+def assert_sound_on_the_true_plant(pid: PID) -> None:
+    """Gain margin >= 2, phase margin >= 45 deg either way, modulus margin >= 0.5 on the true plant, and the
+    servo specs met on the FMU with and without friction."""
+    gm, pm, sm, *_ = true_plant_margins(pid)
+    assert gm[gm > 1].min() >= 2.0 and np.abs((pm + 180.0) % 360.0 - 180.0).min() >= 45.0 and sm.min() >= 0.5
+    for fc in (0.0, 100.0):
+        servo_verdict(pid, fc).assert_passed()
+
+
 def servo_verdict(pid: PID, fc: float):
     """The project's validation of `pid` on the bundled FMU (with Coulomb friction `fc`)."""
     return validate(build_fmu(), pid, SERVO_SCENARIOS, SERVO_SPECS, parameters={"Fc": fc})
@@ -401,10 +418,7 @@ def test_tune_velocity_servo_margins_match_python_control(velocity_pid):
     # the position loop stays below the antiresonance sqrt(KL/JL) = 50 rad/s, where the load decouples
     assert info["antiresonance_rad_s"] == pytest.approx(50.0, rel=1e-3)
     assert info["crossover_rad_s"] <= info["max_crossover_rad_s"] == pytest.approx(0.7 * 50.0, rel=1e-3)
-    w = np.union1d(np.geomspace(1e-2, math.pi / STUDY_DT, 5000), np.linspace(20.0, 150.0, 4001))
-    loop = velocity_loop(pid, two_mass(), w)
-    gm, pm, sm, wpc, wgc, wms = (np.atleast_1d(v) for v in
-                                 control.stability_margins(control.frd(loop, w), returnall=True))
+    gm, pm, sm, wpc, wgc, wms = true_plant_margins(pid)
     # a crossing with phase lead (the collocated velocity loop): python-control says -x deg, the margin is x deg
     assert np.any(pm < 0)
     pm_either_way = np.abs((pm + 180.0) % 360.0 - 180.0)
@@ -520,12 +534,7 @@ def test_velocity_tune_on_an_identified_like_model(motor_stiffness, load_stiffne
                      input_gain=input_gain)
     pid = tune_pid(model, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
     assert pid.inputs == ("Tm",) and pid.outputs == ("omega_m", "theta_L")
-    w = np.union1d(np.geomspace(1e-2, math.pi / STUDY_DT, 5000), np.linspace(20.0, 150.0, 4001))
-    gm, pm, sm, *_ = (np.atleast_1d(v) for v in control.stability_margins(
-        control.frd(velocity_loop(pid, two_mass(), w), w), returnall=True))  # on the true plant
-    assert gm[gm > 1].min() >= 2.0 and np.abs((pm + 180.0) % 360.0 - 180.0).min() >= 45.0 and sm.min() >= 0.5
-    for fc in (0.0, 100.0):
-        servo_verdict(pid, fc).assert_passed()
+    assert_sound_on_the_true_plant(pid)
 
 
 @pytest.mark.parametrize("seed, friction", [(0, 100.0), (2, 0.0)])
@@ -547,12 +556,7 @@ def test_velocity_tune_on_an_identified_model(seed, friction):
     assert model.B[1, 0] * 250.0 > 1.35  # the identified input gain is far off 1/Jm
     pid = tune_pid(model, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
     assert pid.info["crossover_rad_s"] <= 0.7 * pid.info["antiresonance_rad_s"]
-    w = np.union1d(np.geomspace(1e-2, math.pi / STUDY_DT, 5000), np.linspace(20.0, 150.0, 4001))
-    gm, pm, sm, *_ = (np.atleast_1d(v) for v in control.stability_margins(
-        control.frd(velocity_loop(pid, two_mass(), w), w), returnall=True))  # on the true plant
-    assert gm[gm > 1].min() >= 2.0 and np.abs((pm + 180.0) % 360.0 - 180.0).min() >= 45.0 and sm.min() >= 0.5
-    for fc in (0.0, 100.0):
-        servo_verdict(pid, fc).assert_passed()
+    assert_sound_on_the_true_plant(pid)
 
 
 def test_velocity_feedback_beats_the_derivative_of_the_load_angle(servo_pid, velocity_pid):
