@@ -24,7 +24,7 @@ import pysindy as ps
 
 from cosim import SINDYc, build_fmu, simulate
 from cosim.files import write_text_atomic
-from cosim.study import STATES, STUDY_DT, STUDY_X0
+from cosim.study.paper import STATES, STUDY_DT, STUDY_X0
 
 
 def best_of(repeat: int, func) -> float:

@@ -40,7 +40,7 @@ import numpy as np
 from controllers.mpc import MPC
 from cosim import FmuPlant, build_fmu
 from cosim.files import write_text_atomic
-from cosim.study import STATES, STUDY_DT, two_mass_matrices
+from cosim.study.paper import STATES, STUDY_DT, two_mass_matrices
 
 DT = STUDY_DT
 HORIZON = 20
@@ -178,8 +178,8 @@ def main() -> None:
             c.reset()
             runs[name].append(closed_loop(c, fmu, args.seconds))
 
-    # the product's own loop, cosim.closed_loop.closed_loop (bookkeeping, metrics): what users run
-    from cosim.closed_loop import closed_loop as product_loop
+    # the product's own loop, cosim.loop.closed_loop.closed_loop (bookkeeping, metrics): what users run
+    from cosim.loop.closed_loop import closed_loop as product_loop
 
     product = [product_loop(ours, fmu, duration=args.seconds, reference=lambda t: REF * (t >= T_STEP),
                             parameters={"Fc": FC}, model=None, progress=False) for _ in range(args.rounds)]
@@ -252,8 +252,9 @@ def main() -> None:
               f"(buffer) and {du['python_daqp_call']:.3g} N m (plain call), IPOPT {du['ipopt']:.3g} N m. "
               "Targets: p99 <= 50 us, real-time factor >= 20.\n")
     pl = result["product_loop"]
-    table += (f"\nThe same compiled MPC in cosim's own loop (`cosim.closed_loop.closed_loop`, with its bookkeeping and "
-              f"metrics): median {pl['median_us']:.1f} us, p99 {pl['p99_us']:.1f} us per call, real-time factor "
+    table += (f"\nThe same compiled MPC in cosim's own loop (`cosim.loop.closed_loop.closed_loop`, with its "
+              f"bookkeeping and metrics): median {pl['median_us']:.1f} us, p99 {pl['p99_us']:.1f} us per call, "
+              f"real-time factor "
               f"{pl['rtf_median']:.1f}; step settled in {pl['settling_time_s']:.3f} s, steady-state error "
               f"{pl['steady_state_error_rad']:.2g} rad.\n")
     write_text_atomic(out.with_suffix(".md"), table)

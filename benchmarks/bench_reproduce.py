@@ -17,8 +17,8 @@ import tempfile
 from pathlib import Path
 
 from cosim.files import write_text_atomic
-from cosim.reproduce import reproduce_paper
-from cosim.study import STATES
+from cosim.study.paper import STATES
+from cosim.study.reproduce import reproduce_paper
 
 
 def main() -> None:

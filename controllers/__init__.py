@@ -6,7 +6,7 @@
   discrete Riccati equation, input and input-rate bounds, soft state constraints, offset-free tracking
   through a disturbance observer, and warm start.
 * :class:`~controllers.compensation.EffectCompensation` - wraps either one and adds the input that cancels an
-  effect identified by :func:`cosim.diagnosis.diagnose` (Coulomb friction, say), from the measured outputs.
+  effect identified by :func:`cosim.diagnose.diagnosis.diagnose` (Coulomb friction, say), from the measured outputs.
 
 Every controller follows :class:`~controllers.base.Controller`: ``reset()``, ``__call__(t, y) -> u``,
 ``setpoint``, ``save(path)``; :func:`load_controller` reads any kind back.

@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from cosim._compile import CFLAGS, Platform, compile_library, compiler_version, find_compiler
-from cosim.build import fmu_cache_dir
 from cosim.errors import BuildError
+from cosim.plant.build import fmu_cache_dir
+from cosim.plant.toolchain import CFLAGS, Platform, compile_library, compiler_version, find_compiler
 
 __all__ = ["BoundFunction", "CondensedQP", "Layout", "StepProblem", "codegen_support", "compile_function", "condense",
            "step_function"]

@@ -263,7 +263,7 @@ class Controller(ABC):
     events : list of ControllerEvent
         What happened since the last :meth:`reset` (fallbacks, infeasible problems).
     design_model : DesignModel or None
-        The model it was designed on, saved with it; :func:`cosim.closed_loop.closed_loop` also runs the
+        The model it was designed on, saved with it; :func:`cosim.loop.closed_loop.closed_loop` also runs the
         controller against it.
     info : dict
         Design figures (margins, weights, solver...), saved with the controller.

@@ -1,8 +1,8 @@
 """Model-based compensation of identified effects: a linear controller plus the input that cancels the effect.
 
-:func:`cosim.diagnosis.diagnose` adds physical effects to a linear model as nonlinear terms, e.g. Coulomb
+:func:`cosim.diagnose.diagnosis.diagnose` adds physical effects to a linear model as nonlinear terms, e.g. Coulomb
 friction on the motor speed, ``omega_m' = ... + b Tm + c tanh(omega_m/eps)`` with ``c = -Fc b``. A linear
-controller is designed on the model's linear part (:meth:`cosim.model.IdentifiedModel.linear_part`), and
+controller is designed on the model's linear part (:meth:`cosim.identify.model.IdentifiedModel.linear_part`), and
 :class:`EffectCompensation` wraps it: at every call it evaluates the effect's terms on the measured outputs and
 adds their **input equivalent** to the inner controller's input::
 
@@ -27,7 +27,7 @@ A mass with viscous and Coulomb friction, ``v' = -2 v + u - 0.5 tanh(v/0.001)``,
 controller designed on its linear part; the compensation adds ``0.5 tanh(v/0.001)``:
 
 >>> import numpy as np
->>> from cosim.model import IdentifiedModel
+>>> from cosim.identify.model import IdentifiedModel
 >>> from controllers.pid import PID
 >>> model = IdentifiedModel(states=("v",), inputs=("u",), terms=("v", "u", "tanh(v/0.001)"),
 ...                         coef=np.array([[-2.0, 1.0, -0.5]]))
@@ -48,8 +48,8 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ControllerError, InvalidSettingError
-from cosim.model import IdentifiedModel
-from cosim.terms import FUNCTIONS, Term
+from cosim.identify.model import IdentifiedModel
+from cosim.identify.terms import FUNCTIONS, Term
 
 from .base import Controller, ControllerEvent, _jsonable, controller_from_json, register
 
@@ -65,7 +65,7 @@ def effect_terms(model: IdentifiedModel) -> tuple[tuple[str, ...], np.ndarray]:
     Parameters
     ----------
     model : IdentifiedModel
-        Typically :attr:`cosim.diagnosis.DiagnosisReport.model_after`.
+        Typically :attr:`cosim.diagnose.diagnosis.DiagnosisReport.model_after`.
 
     Returns
     -------
@@ -88,7 +88,7 @@ def effect_terms(model: IdentifiedModel) -> tuple[tuple[str, ...], np.ndarray]:
 
 def _compile_law(outputs: Sequence[str], terms: Sequence[Term], gains: np.ndarray):
     """A fast ``law(y) -> list`` computing ``gains @ terms(y)`` (a few µs per call; generated like
-    :func:`cosim.terms.compile_rhs`, from checked expressions only)."""
+    :func:`cosim.identify.terms.compile_rhs`, from checked expressions only)."""
     names = {name: f"y[{i}]" for i, name in enumerate(outputs)}
     rows = [" + ".join(f"{float(g)!r}*{term.to_source(names)}" for g, term in zip(row, terms, strict=True)
                        if g != 0.0) or "0.0" for row in gains]
@@ -106,7 +106,7 @@ class EffectCompensation(Controller):
     inner : Controller or mapping
         The controller designed on the linear part of the model (or its :meth:`Controller.to_dict` form).
     terms : sequence of str
-        Term expressions of measured outputs (see :mod:`cosim.terms`), e.g. ``["tanh(omega_m/0.00114)"]``.
+        Term expressions of measured outputs (see :mod:`cosim.identify.terms`), e.g. ``["tanh(omega_m/0.00114)"]``.
     gains : array-like, shape (len(inner.inputs), len(terms))
         Input equivalent of each term: ``u_comp = gains @ terms(y)``.
     info : mapping, optional

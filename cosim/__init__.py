@@ -1,18 +1,33 @@
 """cosim: identify, diagnose and control real machines, with the plant as an FMU.
 
-Pipeline stages, one module each: ``build`` (FMUs from C source), ``plant`` (:class:`FmuPlant`),
-``signals`` (excitations), ``trajectory`` (:class:`Trajectory`), ``simulation`` (:func:`simulate`),
-``identification`` (:class:`SINDYc`), ``model`` (:class:`IdentifiedModel`), ``metrics``, ``export``
-(python-control, MATLAB, FMI), ``sweep`` (:func:`run_sweep`), ``reproduce`` (the reference study), ``report``.
+The toolkit is a house with a room per pipeline stage, and imports flow one way, from the apps down to the
+plant (docs/architecture.md draws the arrows):
 
-The heavier stages (identification, export, sweep) are imported on first use, so that ``import cosim`` stays
-quick for worker processes.
+* :mod:`cosim.plant` - FMUs built from C (:func:`build_fmu`) and stepped (:class:`FmuPlant`);
+* :mod:`cosim.data` - records (:class:`Trajectory`), measured files, excitation :mod:`~cosim.data.signals`,
+  FMU simulation (:func:`simulate`);
+* :mod:`cosim.identify` - SINDYc (:class:`SINDYc`) and the :class:`IdentifiedModel`;
+* :mod:`cosim.export` - python-control ``StateSpace`` (:func:`to_statespace`), MATLAB and FMI files;
+* :mod:`cosim.diagnose` - the residual of a model traced to the effect it lacks;
+* :mod:`cosim.loop` - closed loops against the FMU, validation (:func:`validate`, :class:`Verdict`);
+* :mod:`cosim.study` - sweeps (:func:`run_sweep`), robustness, the reference study (:func:`reproduce_paper`);
+* :mod:`cosim.cli` and :mod:`cosim.demo` - the ``cosim`` command and the main job.
+
+What every room uses sits beside them: :mod:`cosim.errors`, :mod:`cosim.files` (atomic writes),
+:mod:`cosim.numbers`, :mod:`cosim.report` (HTML) and :mod:`cosim.figures` (PNG).
+
+``import cosim`` loads the plant and data rooms only; the names of the heavier rooms below are imported on
+first use, so that the command line and sweep workers start quickly. Module paths of the flat layout before
+the rooms (``cosim.diagnosis``, ``cosim.trajectory``...) still import, with a
+:class:`~cosim.errors.CosimDeprecationWarning` naming the new place.
 """
 
 import logging
 
-from . import signals
-from .build import build_fmu, fmu_cache_dir
+from . import _moved
+from .data import signals
+from .data.simulation import simulate
+from .data.trajectory import Trajectory
 from .errors import (
     BuildError,
     ControllerError,
@@ -27,36 +42,39 @@ from .errors import (
     SpecError,
     UnknownVariableError,
 )
-from .plant import FmuPlant, open_model_description
-from .simulation import simulate
-from .trajectory import Trajectory
+from .plant.build import build_fmu, fmu_cache_dir
+from .plant.fmu_plant import FmuPlant, open_model_description
 
 __version__ = "0.1.0"
 
 _LAZY = {
-    "SINDYc": "identification",
-    "IdentifiedModel": "model",
-    "SimulationResult": "model",
-    "to_statespace": "export",
-    "export": "export",
-    "run_sweep": "sweep",
-    "SweepResult": "sweep",
-    "reproduce_paper": "reproduce",
-    "ResidualAnalysis": "residuals",
-    "ClosedLoopResult": "closed_loop",
-    "validate": "validation",
-    "Verdict": "validation",
+    "SINDYc": "identify.sindyc",
+    "IdentifiedModel": "identify.model",
+    "SimulationResult": "identify.model",
+    "to_statespace": "export.core",
+    "export": "export.core",
+    "run_sweep": "study.sweep",
+    "SweepResult": "study.sweep",
+    "reproduce_paper": "study.reproduce",
+    "ResidualAnalysis": "diagnose.residuals",
+    "ClosedLoopResult": "loop.closed_loop",
+    "validate": "loop.validation",
+    "Verdict": "loop.validation",
 }
 
 
 def __getattr__(name: str):
-    """Import the heavier stages on first use (PEP 562)."""
+    """Import the heavier rooms on first use (PEP 562)."""
     if name in _LAZY:
         import importlib
 
         module = importlib.import_module(f".{_LAZY[name]}", __name__)
         return getattr(module, name)
     raise AttributeError(f"module 'cosim' has no attribute {name!r}")
+
+
+# the old flat module paths, served on demand from the rooms (see cosim._moved)
+_moved.install()
 
 # A library logs, the application decides where to: FMUs' messages go to logger "cosim.fmu".
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -5,16 +5,16 @@
    without friction and once with Coulomb friction (``Fc``, 100 N m by default) plus 5 % measurement noise.
 2. **Linear model.** Identify a linear SINDYc model from the noisy data, save it (``model.json``) and export it
    to MATLAB. It lacks the friction: its free run drifts away from the data.
-3. **Diagnosis.** :func:`cosim.diagnosis.diagnose` on the first `diagnosis_window` seconds of the same data
+3. **Diagnosis.** :func:`cosim.diagnose.diagnosis.diagnose` on the first `diagnosis_window` seconds of the same data
    (2 s: the search costs time in proportion to the samples) finds what the model lacks, Coulomb friction on
    the motor speed with ``Fc`` and its standard error, adds it and refits: ``model_diagnosed.json``. The free-run
    error before and after is measured against the noise-free run with friction (the truth behind the noisy
    data, as the reference study does).
 4. **Controllers on the linear model.** A PID (velocity feedback from the motor) and an MPC designed on the
    linear model, validated on the FMU with the friction on: a 0.01 rad load-angle step and a 500 N m
-   load-torque step against the telescope specs of :mod:`cosim.validation` (``pid.json``, ``mpc.json``).
+   load-torque step against the telescope specs of :mod:`cosim.loop.validation` (``pid.json``, ``mpc.json``).
 5. **Controllers on the diagnosed model.** The same designs on the linear part of the diagnosed model
-   (:meth:`~cosim.model.IdentifiedModel.linear_part`: refitted with the friction, so no longer biased by it),
+   (:meth:`~cosim.identify.model.IdentifiedModel.linear_part`: refitted with the friction, so no longer biased by it),
    each wrapped in an :class:`~controllers.compensation.EffectCompensation` that adds the identified friction
    torque ``Fc tanh(omega_m/eps)`` computed from the measured motor speed (``pid_diagnosed.json``,
    ``mpc_diagnosed.json``). They are validated in the same scenarios; should a compensated controller fail
@@ -45,20 +45,22 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .build import build_fmu
-from .closed_loop import closed_loop
-from .diagnosis import DiagnosisReport, diagnose
-from .export import export_mat, to_statespace
-from .identification import STUDY_SETTINGS, SINDYc
-from .metrics import nrmse_fit_pct, r2
-from .model import IdentifiedModel
-from .plots import plot_closed_loop, plot_trajectory
+from .data.plots import plot_trajectory
+from .data.simulation import simulate
+from .data.trajectory import Trajectory
+from .diagnose.diagnosis import DiagnosisReport, diagnose
+from .export.core import export_mat, to_statespace
+from .identify.metrics import nrmse_fit_pct, r2
+from .identify.model import IdentifiedModel
+from .identify.sindyc import SINDYc
+from .loop.closed_loop import closed_loop
+from .loop.plots import plot_closed_loop
+from .loop.response import jsonable_metrics
+from .loop.validation import TELESCOPE_SPECS, Verdict, disturbance_step, setpoint_step, validate
+from .plant.build import build_fmu
 from .report import Report
-from .response import jsonable_metrics
-from .simulation import simulate
-from .study import STATES, STUDY_DT
-from .trajectory import Trajectory
-from .validation import TELESCOPE_SPECS, Verdict, disturbance_step, setpoint_step, validate
+from .study.cases import STUDY_SETTINGS
+from .study.paper import STATES, STUDY_DT
 
 #: The demo's identification experiment: a 1-40 Hz multisine at 20 % of the rated torque, from rest.
 DEMO_EXCITATION = "multisine:amp=0.2,fmin=1,fmax=40"
@@ -396,7 +398,9 @@ def _comparison_section(report: Report, linear: dict[str, Any], diagnosed: dict[
 def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: IdentifiedModel, fmu: Path, out: Path,
                        *, friction: float) -> dict[str, dict[str, float]]:
     """How well the linear and the diagnosed model predict the FMU loop of the controllers on the linear model."""
-    from .plots import plt, save_figure
+    from .figures import pyplot, save_figure
+
+    plt = pyplot()
 
     step = DEMO_SCENARIOS[0]
     summary, rows = {}, []

@@ -20,6 +20,7 @@ __all__ = [
     "BuildError",
     "ControllerError",
     "SpecError",
+    "CosimDeprecationWarning",
 ]
 
 
@@ -88,3 +89,7 @@ class ControllerError(CosimError, RuntimeError):
 
 class SpecError(CosimError, ValueError):
     """A closed-loop scenario or specification such as ``settling_time<=0.5`` is malformed."""
+
+
+class CosimDeprecationWarning(DeprecationWarning):
+    """A name or module path that still works but has moved or changed; the message says what to use."""

@@ -16,9 +16,9 @@ import sys
 
 from controllers import MPC, tune_pid
 from cosim import SINDYc, build_fmu, simulate, to_statespace
-from cosim.identification import STUDY_SETTINGS
-from cosim.study import STATES, STUDY_DT
-from cosim.validation import disturbance_step, setpoint_step, validate
+from cosim.loop.validation import disturbance_step, setpoint_step, validate
+from cosim.study.cases import STUDY_SETTINGS
+from cosim.study.paper import STATES, STUDY_DT
 
 SPECS = ["settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000"]
 SCENARIOS = [setpoint_step(0.01, duration=2.0), disturbance_step(500.0, at=0.3, duration=2.0)]

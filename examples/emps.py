@@ -6,14 +6,14 @@ run in closed loop at 1 kHz. Its rigid model is ``M*qdd = tau - Fv*qd - Fc*sign(
 force ``tau = gtau*vir``. This script
 
 1. loads the train file (``DATA_EMPS.mat``) and the test file (``DATA_EMPS_PULSES.mat``) with
-   :func:`cosim.datafile.load_data`: states ``qm`` and ``qm_dot``, input ``force``;
+   :func:`cosim.data.datafile.load_data`: states ``qm`` and ``qm_dot``, input ``force``;
 2. fits the inverse model by least squares (the benchmark's IDIM-LS) without Coulomb friction (the *linear*
    model a plain identification gives), with Coulomb friction, and with asymmetric friction;
 3. scores each by the benchmark's relative force error (train, and cross-test on the test file) and by an
    open-loop simulation from the measured force (RMS position error on the test file);
 4. asserts the baseline numbers against the published reference and the data's README within the
    tolerances in ``TOLERANCES``;
-5. **diagnoses** the linear model on the train record (:func:`cosim.diagnosis.diagnose`: which effect it lacks,
+5. **diagnoses** the linear model on the train record (:func:`cosim.diagnose.diagnosis.diagnose`: which effect it lacks,
    added and refitted by output error, then the next while it pays) and prints the before/after table:
    the linear model, the model after each effect found, and the published rigid models; it asserts what
    :data:`TARGETS` asks: Coulomb friction first, friction asymmetry second, force error at most 4.1 %, and
@@ -56,11 +56,11 @@ from typing import Any
 import numpy as np
 from scipy.signal import decimate
 
-from cosim.datafile import differentiate, load_data
-from cosim.diagnosis import DiagnosisReport, diagnose
+from cosim.data.datafile import differentiate, load_data
+from cosim.data.trajectory import Trajectory
+from cosim.diagnose.diagnosis import DiagnosisReport, diagnose
 from cosim.errors import CosimError, InvalidSettingError
-from cosim.model import IdentifiedModel
-from cosim.trajectory import Trajectory
+from cosim.identify.model import IdentifiedModel
 
 TRAIN_FILE, TEST_FILE = "DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"
 STATES, FORCE = ("qm", "qm_dot"), "force"

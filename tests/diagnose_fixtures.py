@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cosim.model import IdentifiedModel
+from cosim.identify.model import IdentifiedModel
 
 K, C, DT = 20.0, 3.0, 1e-3
 MODEL = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),

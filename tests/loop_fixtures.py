@@ -6,7 +6,7 @@ import control
 import numpy as np
 
 from controllers.base import Controller, DesignModel
-from cosim.study import STATES, two_mass_matrices
+from cosim.study.paper import STATES, two_mass_matrices
 
 DT = 1 / 2257
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-import cosim.build
-from cosim.build import build_fmu, fmu_cache_dir, fmu_source_dir
+import cosim.plant.build
 from cosim.errors import BuildError, FmuNotFoundError, InvalidSettingError
+from cosim.plant.build import build_fmu, fmu_cache_dir, fmu_source_dir
 
 VERSIONS = ("2.0", "3.0")
 JM, JL = 250.0, 1000.0
@@ -77,7 +77,7 @@ def test_source_change_gives_a_new_key(fmus, cache, tmp_path, monkeypatch):
     shutil.copytree(fmu_source_dir(), changed)
     with open(changed / "model.c", "a") as fh:
         fh.write("\n/* a change */\n")
-    monkeypatch.setattr(cosim.build, "fmu_source_dir", lambda name="two_mass_servo": changed)
+    monkeypatch.setattr(cosim.plant.build, "fmu_source_dir", lambda name="two_mass_servo": changed)
     rebuilt = build_fmu(fmi_version="2.0", cache_dir=cache)
     assert rebuilt.is_file()
     assert rebuilt.parent != Path(fmus["2.0"]).parent
@@ -99,7 +99,7 @@ def test_compiler_errors_are_reported_and_leave_nothing(tmp_path, monkeypatch):
     shutil.copytree(fmu_source_dir(), broken)
     with open(broken / "model.c", "a") as fh:
         fh.write("\nthis is not C;\n")
-    monkeypatch.setattr(cosim.build, "fmu_source_dir", lambda name="two_mass_servo": broken)
+    monkeypatch.setattr(cosim.plant.build, "fmu_source_dir", lambda name="two_mass_servo": broken)
     with pytest.raises(BuildError, match="error") as info:
         build_fmu(cache_dir=tmp_path / "cache")
     assert "\n" not in str(info.value)

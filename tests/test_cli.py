@@ -108,8 +108,8 @@ def test_data_info_missing_columns_and_good_file(tmp_path):
 
 @pytest.fixture()
 def model_file(tmp_path):
-    from cosim.model import IdentifiedModel
-    from cosim.study import INPUTS, STATES, two_mass_matrices
+    from cosim.identify.model import IdentifiedModel
+    from cosim.study.paper import INPUTS, STATES, two_mass_matrices
 
     a, b = two_mass_matrices()
     model = IdentifiedModel(states=STATES, inputs=INPUTS, terms=STATES + INPUTS, coef=np.hstack([a, b]), dt=1e-3)

@@ -7,8 +7,8 @@ import pytest
 from click.testing import CliRunner
 
 from cosim.cli import main
-from cosim.model import IdentifiedModel
-from cosim.study import STATES, two_mass_matrices
+from cosim.identify.model import IdentifiedModel
+from cosim.study.paper import STATES, two_mass_matrices
 
 
 @pytest.fixture(scope="module")

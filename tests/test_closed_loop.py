@@ -6,10 +6,10 @@ from loop_fixtures import DT, StateFeedback, true_model
 
 from controllers.base import DesignModel
 from cosim import build_fmu
-from cosim.closed_loop import ModelPlant, closed_loop
 from cosim.errors import InvalidSettingError, UnknownVariableError
-from cosim.plant import FmuPlant
-from cosim.study import STATES
+from cosim.loop.closed_loop import ModelPlant, closed_loop
+from cosim.plant.fmu_plant import FmuPlant
+from cosim.study.paper import STATES
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ import pytest
 from controllers.base import controller_kinds, load_controller
 from controllers.compensation import EffectCompensation, effect_terms
 from controllers.pid import PID
-from cosim.closed_loop import ModelPlant
 from cosim.errors import InvalidSettingError
-from cosim.model import IdentifiedModel
+from cosim.identify.model import IdentifiedModel
+from cosim.loop.closed_loop import ModelPlant
 
 # a mass with viscous and Coulomb friction: v' = -2 v + 0.5 u - 0.25 tanh(v/0.001), i.e. Fc = 0.5 in units of u
 FRICTION = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u", "tanh(v/0.001)"),

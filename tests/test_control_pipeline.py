@@ -1,6 +1,6 @@
 """The controller stage end to end: FMU data -> SINDYc model -> PID and MPC designed on it -> validated on the FMU.
 
-The specs are the telescope specs of cosim.validation without the timing ones (timing is measured in
+The specs are the telescope specs of cosim.loop.validation without the timing ones (timing is measured in
 benchmarks/, never asserted in tests): a 0.01 rad load-angle step settles into 2 % within 1 s with at most
 10 % overshoot and at most 2e-5 rad (4 arcsec) steady-state error, and a 500 N m load-torque step is
 rejected without offset, torque within the rated 5000 N m, with and without Coulomb friction in the FMU.
@@ -12,10 +12,11 @@ from controllers.base import controller_from_json
 from controllers.mpc import MPC
 from controllers.pid import tune_pid
 from cosim import build_fmu, simulate
-from cosim.export import to_statespace
-from cosim.identification import STUDY_SETTINGS, SINDYc
-from cosim.study import STATES, STUDY_DT
-from cosim.validation import disturbance_step, setpoint_step, validate
+from cosim.export.core import to_statespace
+from cosim.identify.sindyc import SINDYc
+from cosim.loop.validation import disturbance_step, setpoint_step, validate
+from cosim.study.cases import STUDY_SETTINGS
+from cosim.study.paper import STATES, STUDY_DT
 
 SPECS = ["settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000",
          "constraint_violations<=0"]
@@ -79,7 +80,7 @@ def test_saved_controllers_behave_identically(fmu, controllers, tmp_path):
 
 
 def test_infeasible_mpc_in_closed_loop_falls_back_then_stops_with_time_and_reason(fmu, identified):
-    from cosim.closed_loop import closed_loop
+    from cosim.loop.closed_loop import closed_loop
 
     # a hard bound on the motor speed that a 20 kN m load torque (4x the rated motor torque) must break
     mpc = MPC(identified, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"],

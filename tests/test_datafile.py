@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 import scipy.io
 
-from cosim.datafile import DERIVATIVE_METHODS, MIN_SAMPLES, check_excitation, differentiate, load_data
+from cosim.data.datafile import DERIVATIVE_METHODS, MIN_SAMPLES, check_excitation, differentiate, load_data
+from cosim.data.trajectory import Trajectory
 from cosim.errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
-from cosim.trajectory import Trajectory
 
 DT = 1e-3
 N = 400

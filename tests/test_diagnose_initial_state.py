@@ -15,10 +15,10 @@ from click.testing import CliRunner
 from diagnose_fixtures import DT, MODEL, assert_one_line_error, record, write_csv
 
 from cosim.cli import main
-from cosim.diagnosis import diagnose
+from cosim.data.trajectory import Trajectory
+from cosim.diagnose.diagnosis import diagnose
+from cosim.diagnose.screening import OutputErrorScreen, noise_level
 from cosim.errors import InvalidSettingError
-from cosim.screening import OutputErrorScreen, noise_level
-from cosim.trajectory import Trajectory
 
 FC = 0.6
 

@@ -14,8 +14,8 @@ from click.testing import CliRunner
 from diagnose_fixtures import MODEL, assert_one_line_error, record, write_csv
 
 from cosim.cli import main
-from cosim.datafile import load_data
-from cosim.diagnosis import diagnose
+from cosim.data.datafile import load_data
+from cosim.diagnose.diagnosis import diagnose
 from cosim.errors import DataError, UnknownVariableError
 
 

@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from cosim import build_fmu, simulate
-from cosim.diagnosis import diagnose
+from cosim.data.trajectory import Trajectory
+from cosim.diagnose.diagnosis import diagnose
 from cosim.errors import DataError, UnknownVariableError
-from cosim.identification import STUDY_SETTINGS, IdentificationWarning, SINDYc
-from cosim.model import IdentifiedModel
-from cosim.study import STATES, STUDY_DT
-from cosim.trajectory import Trajectory
+from cosim.identify.model import IdentifiedModel
+from cosim.identify.sindyc import IdentificationWarning, SINDYc
+from cosim.study.cases import STUDY_SETTINGS
+from cosim.study.paper import STATES, STUDY_DT
 
 DURATION = round(2.0 / STUDY_DT) * STUDY_DT
 MULTISINE = "multisine:amp=0.2,fmin=1,fmax=40"

@@ -17,7 +17,7 @@ import pytest
 from click.testing import CliRunner
 
 from cosim.cli import main
-from cosim.model import IdentifiedModel
+from cosim.identify.model import IdentifiedModel
 
 K, C, DT, N = 400.0, 8.0, 1e-3, 4000
 LINEAR = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),

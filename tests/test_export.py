@@ -14,10 +14,10 @@ import pytest
 import scipy.io
 from fmpy.validation import validate_fmu
 
-import cosim.terms
+import cosim.identify.terms
 from cosim import simulate
 from cosim.errors import BuildError, FmiCallError, InvalidSettingError, UnknownVariableError
-from cosim.export import (
+from cosim.export.core import (
     CONSTANT_INPUT,
     OperatingPoint,
     export,
@@ -26,7 +26,7 @@ from cosim.export import (
     operating_point,
     to_statespace,
 )
-from cosim.model import IdentifiedModel
+from cosim.identify.model import IdentifiedModel
 
 JM, JL, KL, BM, BL = 250.0, 1000.0, 2.5e6, 50.0, 500.0
 STATES = ("theta_m", "omega_m", "theta_L", "omega_L")
@@ -270,7 +270,7 @@ def test_fmu_divergence_is_an_error(tmp_path):
 
 def test_fmu_refuses_what_it_cannot_express(tmp_path, monkeypatch):
     clip = (lambda v: np.clip(v, -1, 1), lambda v: min(1.0, max(-1.0, v)), "cosim_clip")
-    monkeypatch.setitem(cosim.terms.FUNCTIONS, "clip", clip)
+    monkeypatch.setitem(cosim.identify.terms.FUNCTIONS, "clip", clip)
     model = IdentifiedModel(states=("x",), inputs=("u",), terms=("x", "clip(u)"), coef=np.array([[-1.0, 1.0]]))
     with pytest.raises(InvalidSettingError, match=r"term 'clip\(u\)' uses clip, which the generated C cannot"):
         export_fmu(model, tmp_path / "clip.fmu", dt=0.01)

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from cosim import build_fmu, simulate
+from cosim.data.trajectory import Trajectory
 from cosim.errors import DataError, InvalidSettingError, UnknownVariableError
-from cosim.identification import DIFFERENTIATION_METHODS, IdentificationWarning, SINDYc, study_case
-from cosim.model import IdentifiedModel
-from cosim.study import STUDY_DT, STUDY_TABLE1, STUDY_X0
-from cosim.trajectory import Trajectory
+from cosim.identify.model import IdentifiedModel
+from cosim.identify.sindyc import DIFFERENTIATION_METHODS, IdentificationWarning, SINDYc
+from cosim.study.cases import study_case
+from cosim.study.paper import STUDY_DT, STUDY_TABLE1, STUDY_X0
 
 STATES = ["theta_m", "omega_m", "theta_L", "omega_L"]
 KINEMATICS = {"theta_m": "omega_m", "theta_L": "omega_L"}
@@ -287,7 +288,7 @@ def test_output_error_refinement_removes_the_noise_bias(clean):
     x0 = refined.model_.meta["x0"][0]
     u = clean["square"][["Tm"]][:-1]
     truth = clean["square"][STATES]
-    from cosim.metrics import max_deviation_pct, r2
+    from cosim.identify.metrics import max_deviation_pct, r2
 
     dev = max_deviation_pct(truth, refined.simulate(x0, u).states)
     assert np.all(dev < 1.0), dev
@@ -311,7 +312,7 @@ def test_output_error_refinement_of_a_nonlinear_model():
     refined = SINDYc(refine="output_error", **common).fit(noisy)
     meta = refined.model_.meta["refinement"]
     assert meta["status"] == "ok" and meta["cost"] < meta["cost_start"]
-    from cosim.metrics import max_deviation_pct
+    from cosim.identify.metrics import max_deviation_pct
 
     steps = clean_run[["u"]][:-1]
     dev_refined = max_deviation_pct(clean_run["x"], refined.simulate(refined.model_.meta["x0"][0], steps).states[:, 0])
@@ -340,7 +341,7 @@ def test_auto_threshold_with_refinement_prunes_on_output_error(clean):
     row = dict(zip(est.terms_, est.coef_[1], strict=True))
     assert row["Tm"] == pytest.approx(0.004, rel=0.3)
     assert est.model_.meta["stable"] is True
-    from cosim.metrics import max_deviation_pct
+    from cosim.identify.metrics import max_deviation_pct
 
     sim = est.simulate(est.model_.meta["x0"][0], clean["square"][["Tm"]][:-1])
     assert np.all(max_deviation_pct(clean["square"][STATES], sim.states) < 0.5)

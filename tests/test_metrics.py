@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from cosim.data.trajectory import Trajectory
 from cosim.errors import DataError, InvalidSettingError
-from cosim.metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_pct, r2
-from cosim.model import IdentifiedModel
-from cosim.trajectory import Trajectory
+from cosim.identify.metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_pct, r2
+from cosim.identify.model import IdentifiedModel
 
 
 def test_r2_hand_computed():

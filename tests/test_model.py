@@ -9,8 +9,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from cosim.errors import DataError, InvalidSettingError, UnknownVariableError
-from cosim.model import IdentifiedModel
-from cosim.terms import Term, compile_rhs, polynomial_terms
+from cosim.identify.model import IdentifiedModel
+from cosim.identify.terms import Term, compile_rhs, polynomial_terms
 
 STATES = ("theta_m", "omega_m", "theta_L", "omega_L")
 P = {"Jm": 250.0, "JL": 1000.0, "KL": 2.5e6, "Bm": 50.0, "BL": 500.0}

@@ -11,7 +11,7 @@ from controllers import load_controller
 from controllers.mpc import MPC
 from cosim import FmuPlant, build_fmu
 from cosim.errors import ControllerError, InvalidSettingError, UnknownVariableError
-from cosim.study import STUDY_DT, two_mass_matrices
+from cosim.study.paper import STUDY_DT, two_mass_matrices
 
 DT = STUDY_DT
 NAMES = ["theta_m", "omega_m", "theta_L", "omega_L"]

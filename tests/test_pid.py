@@ -15,10 +15,10 @@ import pytest
 from controllers.base import DesignModel, controller_from_json, controller_kinds, load_controller
 from controllers.pid import PID, tune_pid
 from cosim import FmuPlant, build_fmu
-from cosim.closed_loop import closed_loop
 from cosim.errors import ControllerError, InvalidSettingError, UnknownVariableError
-from cosim.study import STUDY_DT, two_mass_matrices
-from cosim.validation import validate
+from cosim.loop.closed_loop import closed_loop
+from cosim.loop.validation import validate
+from cosim.study.paper import STUDY_DT, two_mass_matrices
 
 STEP = 0.01  # rad, load-angle step of the two-mass tests
 #: The project's servo specification: a 0.01 rad load-angle step and a 500 N m load-torque step.
@@ -545,10 +545,11 @@ def test_velocity_tune_on_an_identified_model(seed, friction):
     the spec on the FMU with and without friction, with sound margins on the true plant (measured with
     Fc = 100: settling 0.65 / 0.53 s, overshoot 7.8 / 6.1 %, sse 1.3e-5 / 1.9e-7 rad, load-step recovery
     0.92 / 0.80 s and sse 1.3e-5 / 1.1e-5 rad; true-plant margins 10.1 / 10.1 dB, 54.6 / 48.7 deg)."""
-    from cosim.export import to_statespace
-    from cosim.identification import STUDY_SETTINGS, SINDYc
-    from cosim.simulation import simulate
-    from cosim.study import STATES, STUDY_X0
+    from cosim.data.simulation import simulate
+    from cosim.export.core import to_statespace
+    from cosim.identify.sindyc import SINDYc
+    from cosim.study.cases import STUDY_SETTINGS
+    from cosim.study.paper import STATES, STUDY_X0
 
     data = simulate(build_fmu(), {"Tm": "square:amp=0.1,freq=2"}, duration=9028 * STUDY_DT, dt=STUDY_DT,
                     start=STUDY_X0, parameters={"Fc": friction}).with_noise(0.05, seed=seed)

@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from cosim.cli import main
-from cosim.model import IdentifiedModel
-from cosim.study import STATES, STUDY_TABLE1, two_mass_matrices
+from cosim.identify.model import IdentifiedModel
+from cosim.study.paper import STATES, STUDY_TABLE1, two_mass_matrices
 
 
 def run(*args: str):

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from cosim import build_fmu, simulate
+from cosim.data.trajectory import Trajectory
+from cosim.diagnose.residuals import correlation_tests, residuals
 from cosim.errors import DataError, UnknownVariableError
-from cosim.model import IdentifiedModel
-from cosim.residuals import correlation_tests, residuals
-from cosim.study import STATES, STUDY_DT, two_mass_matrices
-from cosim.trajectory import Trajectory
+from cosim.identify.model import IdentifiedModel
+from cosim.study.paper import STATES, STUDY_DT, two_mass_matrices
 
 N = 20_000
 

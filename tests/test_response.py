@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.response import jsonable_metrics, response_metrics
+from cosim.loop.response import jsonable_metrics, response_metrics
 
 T = np.linspace(0.0, 20.0, 200_001)
 

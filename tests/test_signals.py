@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.errors import InvalidSettingError, SignalSpecError
-from cosim.signals import (
+from cosim.data.signals import (
     SIGNAL_KINDS,
     Chirp,
     Multisine,
@@ -26,6 +25,7 @@ from cosim.signals import (
     square,
     step,
 )
+from cosim.errors import InvalidSettingError, SignalSpecError
 
 # ----------------------------------------------------------------------------------------------------- square
 

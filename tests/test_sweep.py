@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from cosim import CosimError, DataError, InvalidSettingError
-from cosim.sweep import CaseFailedError, SweepError, SweepResult, _example_case, run_sweep
+from cosim.study.sweep import CaseFailedError, SweepError, SweepResult, _example_case, run_sweep
 
-# The toy case lives in cosim.sweep so that spawned processes and Dask workers import it by name from any
+# The toy case lives in cosim.study.sweep so that spawned processes and Dask workers import it by name from any
 # checkout, whatever pytest's import mode. Case 2 is designed to fail (negative noise level).
 CASES = [
     {"level": 0.0, "seed": 1},

@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from cosim.data.trajectory import Trajectory
 from cosim.errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
-from cosim.trajectory import Trajectory
 
 
 @pytest.fixture

@@ -13,8 +13,7 @@ from loop_fixtures import StateFeedback
 
 from cosim import build_fmu
 from cosim.errors import SpecError
-from cosim.robustness import robustness
-from cosim.validation import (
+from cosim.loop.validation import (
     Scenario,
     assert_meets,
     disturbance_step,
@@ -24,7 +23,8 @@ from cosim.validation import (
     setpoint_step,
     validate,
 )
-from cosim.validation_report import write_validation_report
+from cosim.loop.validation_report import write_validation_report
+from cosim.study.robustness import robustness
 
 # The fixture controller is a state-feedback law without integral action: it tracks a step (no model error)
 # but keeps an offset under a load torque: one scenario passes, the other fails, for known reasons.

@@ -1,0 +1,5 @@
+"""``python -m cosim.cli ...`` runs the ``cosim`` command."""
+
+from . import main
+
+main()

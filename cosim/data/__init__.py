@@ -1,0 +1,50 @@
+"""The data room: sampled records and where they come from.
+
+* :mod:`~cosim.data.trajectory` - :class:`Trajectory`, a record of named signals with units and roles, its CSV
+  and Parquet files;
+* :mod:`~cosim.data.datafile` - :func:`load_data` for measured files (CSV, Parquet, ``.mat``) with column
+  expressions, and derivative estimation (:func:`differentiate`);
+* :mod:`~cosim.data.signals` - excitation signals (square, sine, PRBS, chirp, multisine...) and their specs;
+* :mod:`~cosim.data.simulation` - :func:`simulate`: an FMU driven by signals, recorded as a Trajectory;
+* :mod:`~cosim.data.plots` - :func:`plot_trajectory`.
+
+Imports the plant room and the foundation only.
+"""
+
+from __future__ import annotations
+
+from .datafile import DERIVATIVE_METHODS, MIN_SAMPLES, UNIFORM_RTOL, check_excitation, differentiate, load_data
+from .plots import plot_trajectory
+from .signals import (
+    SIGNAL_KINDS,
+    Chirp,
+    Constant,
+    Multisine,
+    Prbs,
+    ScaledSignal,
+    Signal,
+    SignalKind,
+    SignalSum,
+    SineWave,
+    SquareWave,
+    Step,
+    chirp,
+    constant,
+    multisine,
+    parse_signal,
+    prbs,
+    signal_kinds_help,
+    sine,
+    square,
+    step,
+)
+from .simulation import InputSpec, sample_input, simulate
+from .trajectory import ROLES, Trajectory
+
+__all__ = [
+    "Chirp", "Constant", "DERIVATIVE_METHODS", "InputSpec", "MIN_SAMPLES", "Multisine", "Prbs", "ROLES",
+    "SIGNAL_KINDS", "ScaledSignal", "Signal", "SignalKind", "SignalSum", "SineWave", "SquareWave", "Step",
+    "Trajectory", "UNIFORM_RTOL", "check_excitation", "chirp", "constant", "differentiate", "load_data",
+    "multisine", "parse_signal", "plot_trajectory", "prbs", "sample_input", "signal_kinds_help", "simulate", "sine",
+    "square", "step",
+]

@@ -1,0 +1,187 @@
+"""One call for the common case: run an FMU with given input signals and get a :class:`Trajectory`.
+
+Inputs are sampled at the communication points ``t_k = t0 + k*dt`` and held over the step (zero-order hold).
+Row k of an input column in the result is the value held from ``t_k`` to ``t_{k+1}``; row k of an output
+column is the output at ``t_k``.
+
+Examples
+--------
+>>> from cosim import simulate, build_fmu, signals
+>>> traj = simulate(build_fmu(), {"Tm": signals.square(500.0, 2.0)}, duration=1.0, dt=1e-3)
+>>> len(traj), traj.states
+(1001, ('theta_m', 'omega_m', 'theta_L', 'omega_L'))
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..errors import InvalidSettingError, UnknownVariableError
+from ..plant.fmu_plant import FmuPlant
+from .signals import Signal, parse_signal
+from .trajectory import Trajectory
+
+__all__ = ["simulate", "InputSpec", "sample_input"]
+
+#: What an input can be given as: a Signal (or any callable of time), a constant, samples at the
+#: communication points, or a signal spec string such as ``"square:amp=0.1,freq=2"``.
+InputSpec = Signal | Callable[[np.ndarray], Any] | float | np.ndarray | str
+
+_PROGRESS_MIN_STEPS = 200_000  # below this a run takes well under a second: no bar
+_CHUNK = 4096
+
+
+def steps_for(duration: float, dt: float) -> int:
+    """Number of steps of `dt` in `duration`, which must be a whole number of them."""
+    for name, value in (("duration", duration), ("dt", dt)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InvalidSettingError(f"{name} must be a positive number of seconds, got {value!r}")
+    n = round(duration / dt)
+    if n < 1 or abs(n * dt - duration) > 1e-9 * max(1.0, duration):
+        raise InvalidSettingError(f"duration {duration:g} s is not a whole number of steps of dt={dt:g} s; "
+                                  f"choose duration = n*dt (e.g. {max(n, 1) * dt:.9g} s)")
+    return n
+
+
+def sample_input(name: str, spec: InputSpec, t: np.ndarray, *, maximum: float | None = None) -> np.ndarray:
+    """Sample one input at the times `t` (zero-order hold between them).
+
+    Parameters
+    ----------
+    name : str
+        The input's name (for messages).
+    spec : Signal, callable, float, array or str
+        See :data:`InputSpec`. An array must hold one value per time in `t` (or one fewer: the last is held).
+    t : numpy.ndarray
+        Sample times.
+    maximum : float, optional
+        The input's declared maximum, the reference of ``amp=`` fractions in string specs.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sample_input("Tm", "step:value=2,at=0.5", np.array([0.0, 0.5, 1.0])).tolist()
+    [0.0, 2.0, 2.0]
+    """
+    if isinstance(spec, str):
+        spec = parse_signal(spec, maximum=maximum)
+    if callable(spec):
+        values = np.asarray(spec(t), dtype=float)
+        if values.ndim == 0:
+            values = np.full(t.shape, float(values))
+    elif np.ndim(spec) == 0:
+        values = np.full(t.shape, float(spec))
+    else:
+        values = np.asarray(spec, dtype=float).ravel()
+        if values.shape[0] == t.shape[0] - 1:
+            values = np.append(values, values[-1])
+        if values.shape[0] != t.shape[0]:
+            raise InvalidSettingError(f"input {name} has {values.shape[0]} samples, expected {t.shape[0] - 1} "
+                                      f"(one per step) or {t.shape[0]}")
+    if values.shape != t.shape:
+        raise InvalidSettingError(f"input {name} gave {values.shape} values for {t.shape[0]} sample times")
+    if not np.all(np.isfinite(values)):
+        bad = int(np.argmax(~np.isfinite(values)))
+        raise InvalidSettingError(f"input {name} is not finite at t={t[bad]:.9g} s; inputs must be finite")
+    return values
+
+
+def _unit(var: Any) -> str:
+    unit = getattr(var, "unit", None)
+    if not unit and getattr(var, "declaredType", None) is not None:
+        unit = getattr(var.declaredType, "unit", None)
+    return unit or ""
+
+
+def simulate(
+    fmu: str | os.PathLike,
+    inputs: Mapping[str, InputSpec] | None = None,
+    *,
+    duration: float,
+    dt: float,
+    parameters: Mapping[str, float] | None = None,
+    start: Mapping[str, float] | None = None,
+    t0: float = 0.0,
+    outputs: list[str] | None = None,
+    progress: bool | None = None,
+) -> Trajectory:
+    """Simulate a co-simulation FMU at a fixed step and return its trajectory.
+
+    Parameters
+    ----------
+    fmu : path-like
+        The FMU (FMI 2.0 or 3.0 co-simulation).
+    inputs : mapping, optional
+        Input name -> :data:`InputSpec`. Inputs not named stay at their start values.
+    duration, dt : float
+        Length of the run and communication step, in seconds; `duration` is a whole number of steps.
+    parameters, start : mapping, optional
+        Parameter values and start values by name (see :class:`FmuPlant`).
+    t0 : float
+        Start time.
+    outputs : list of str, optional
+        Outputs to record (default: all).
+    progress : bool, optional
+        Show a progress bar; by default only for long runs on a terminal.
+
+    Returns
+    -------
+    Trajectory
+        Time ``t0 + k*dt`` for k = 0..n, the inputs (role ``input``), the outputs (role ``state`` when the
+        FMU declares them as states, else ``output``); ``meta`` holds the FMU, dt, parameters and start values.
+
+    Examples
+    --------
+    >>> from cosim import simulate, build_fmu
+    >>> traj = simulate(build_fmu(), {"Tm": 1000.0}, duration=0.5, dt=1e-3, parameters={"KL": 1e6})
+    >>> bool(traj["omega_m"][-1] > 0)
+    True
+    """
+    n = steps_for(duration, dt)
+    t = t0 + dt * np.arange(n + 1)
+    inputs = dict(inputs or {})
+    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs) as plant:
+        unknown = [name for name in inputs if name not in plant.inputs]
+        if unknown:
+            raise UnknownVariableError(f"{plant.path.name} has no real input named {unknown[0]!r}; "
+                                       f"its inputs are: {', '.join(plant.inputs) or 'none'}")
+        u = np.empty((n + 1, len(plant.inputs)))
+        start_values = plant.get(plant.inputs)
+        for j, name in enumerate(plant.inputs):
+            var = plant.variables[name]
+            maximum = float(var.max) if getattr(var, "max", None) not in (None, "") else None
+            u[:, j] = sample_input(name, inputs[name], t, maximum=maximum) if name in inputs else start_values[j]
+        y = np.empty((n + 1, len(plant.outputs)))
+        y[0] = plant.read_outputs()
+        # disable=None lets tqdm show the bar only on a terminal
+        disable = (None if n >= _PROGRESS_MIN_STEPS else True) if progress is None else not progress
+        with tqdm(total=n, unit="step", desc=f"simulate {plant.path.stem}", disable=disable, leave=False) as bar:
+            for first in range(0, n, _CHUNK):
+                last = min(first + _CHUNK, n)
+                y[first + 1:last + 1] = plant.run(u[first:last])
+                bar.update(last - first)
+        variables = plant.variables
+        names = list(plant.inputs) + list(plant.outputs)
+        roles = {name: "input" for name in plant.inputs}
+        roles.update({name: "state" if name in plant.states else "output" for name in plant.outputs})
+        meta = {
+            "source": "fmu",
+            "fmu": plant.path.name,
+            "model": plant.model_description.modelName,
+            "fmi_version": plant.fmi_version,
+            "dt": dt,
+            "t0": t0,
+            "intersample": "zoh",
+            "parameters": plant.parameters,
+            "start": dict(start or {}),
+            "inputs": {name: str(spec) if not isinstance(spec, np.ndarray) else "samples"
+                       for name, spec in inputs.items()},
+        }
+    data = dict(zip(names, np.hstack([u, y]).T, strict=True))
+    return Trajectory.from_arrays(t, data, units={k: _unit(variables[k]) for k in names}, roles=roles, meta=meta)

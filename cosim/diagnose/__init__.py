@@ -1,0 +1,25 @@
+"""The diagnose room: the residual of a model traced to the physical effect it lacks.
+
+* :mod:`~cosim.diagnose.residuals` - equation, one-step and free-run residuals with whiteness and
+  cross-correlation tests (:func:`residuals`);
+* :mod:`~cosim.diagnose.effects` - the catalogue of effects (friction, backlash, cogging...) and where each
+  attaches to a model's equations;
+* :mod:`~cosim.diagnose.screening` - the output-error score test and fit of candidate effects;
+* :mod:`~cosim.diagnose.diagnosis` - :func:`diagnose`: screen, fit, judge, add, repeat; the
+  :class:`DiagnosisReport`.
+
+Imports the export and identify rooms and below.
+"""
+
+from __future__ import annotations
+
+from .diagnosis import DiagnosisReport, EffectCandidate, diagnose
+from .effects import EFFECTS, Attachment, Effect, Roles, register_effect
+from .residuals import RESIDUAL_KINDS, ResidualAnalysis, ResidualTests, correlation_tests, residuals
+from .screening import Nuisance, OutputErrorScreen, output_error_fit
+
+__all__ = [
+    "Attachment", "DiagnosisReport", "EFFECTS", "Effect", "EffectCandidate", "Nuisance", "OutputErrorScreen",
+    "RESIDUAL_KINDS", "ResidualAnalysis", "ResidualTests", "Roles", "correlation_tests", "diagnose",
+    "output_error_fit", "register_effect", "residuals",
+]

@@ -1,0 +1,25 @@
+"""The identify room: from a Trajectory to an :class:`IdentifiedModel`.
+
+* :mod:`~cosim.identify.sindyc` - :class:`SINDYc`, the sparse identification estimator (scikit-learn style);
+* :mod:`~cosim.identify.terms` - library terms as expressions (:class:`Term`), compiled right-hand sides;
+* :mod:`~cosim.identify.output_error` - refinement of a model by its free-run (output) error;
+* :mod:`~cosim.identify.model` - :class:`IdentifiedModel`: equations, simulation, JSON files;
+* :mod:`~cosim.identify.metrics` - fit figures: R², NRMSE fit, maximum deviation, k-step-ahead error.
+
+Imports the data and plant rooms and the foundation.
+"""
+
+from __future__ import annotations
+
+from .metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_pct, r2
+from .model import DIVERGENCE_LIMIT, MODEL_FORMAT, MODEL_VERSION, IdentifiedModel, SimulationResult
+from .output_error import OutputErrorFit, refine_output_error, simulate_linear_batch
+from .sindyc import DIFFERENTIATION_METHODS, MIN_SAMPLES_PER_TERM, IdentificationWarning, SINDYc
+from .terms import FUNCTIONS, Term, compile_rhs, polynomial_terms
+
+__all__ = [
+    "DIFFERENTIATION_METHODS", "DIVERGENCE_LIMIT", "FUNCTIONS", "IdentificationWarning", "IdentifiedModel",
+    "METRICS", "MIN_SAMPLES_PER_TERM", "MODEL_FORMAT", "MODEL_VERSION", "OutputErrorFit", "SINDYc",
+    "SimulationResult", "Term", "compile_rhs", "k_step_ahead_error", "max_deviation_pct", "nrmse_fit_pct",
+    "polynomial_terms", "r2", "refine_output_error", "simulate_linear_batch",
+]

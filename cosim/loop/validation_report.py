@@ -1,0 +1,98 @@
+"""The closed-loop validation report: one HTML file with the verdict, the checks, the figures and the plots.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from cosim import build_fmu
+>>> from cosim.loop.validation import validate
+>>> from controllers.pid import PID
+>>> pid = PID(kp=1.5e4, ki=1.3e4, kd=6.4e3, tf=0.022, b=0.33, dt=1e-3, inputs="Tm", outputs="theta_L",
+...           u_min=-5000, u_max=5000)
+>>> verdict = validate(build_fmu(), pid, "step:amp=0.01,duration=1", ["input_limit<=5000"])
+>>> out = pathlib.Path(tempfile.mkdtemp())
+>>> path, pngs = write_validation_report(verdict, out / "report.html", controller=pid)
+>>> path.name, [p.name for p in pngs]
+('report.html', ['closed_loop_1.png'])
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from ..report import Report
+from .plots import plot_closed_loop
+from .validation import Verdict
+
+__all__ = ["write_validation_report"]
+
+
+def _fmt(value: Any) -> Any:
+    if isinstance(value, float):
+        return "n/a" if not math.isfinite(value) else float(f"{value:.6g}")
+    return "n/a" if value is None else value
+
+
+def write_validation_report(verdict: Verdict, path: str | os.PathLike, *, controller: Any = None,
+                            robustness: Any = None, plots_dir: str | os.PathLike | None = None,
+                            title: str = "Closed-loop validation") -> tuple[Path, list[Path]]:
+    """Write the HTML report of `verdict` (and of a robustness study); return its path and the PNG plots.
+
+    Parameters
+    ----------
+    verdict : Verdict
+    path : path-like
+        The HTML file.
+    controller : Controller, optional
+        Its kind, settings summary and design figures (``info``) go into the report.
+    robustness : RobustnessResult, optional
+        Pass rate, worst case and the per-sample table.
+    plots_dir : path-like, optional
+        Where the PNG plots go (default: beside the report), named ``closed_loop_<i>.png``.
+    """
+    path = Path(path)
+    folder = Path(plots_dir) if plots_dir is not None else path.parent
+    report = Report(title, subtitle=("PASSED" if verdict.passed else "FAILED") +
+                    f": {sum(1 for c in verdict.checks if c['passed'])} of "
+                    f"{sum(1 for c in verdict.checks if c['passed'] is not None)} checks met")
+    if verdict.reasons:
+        report.add_text("Why it failed", "\n\n".join(verdict.reasons))
+    if controller is not None:
+        info = {k: v for k, v in getattr(controller, "info", {}).items() if not isinstance(v, (dict, list))}
+        report.add_table("Controller", [{"kind": getattr(controller, "kind", type(controller).__name__),
+                                         "dt [s]": controller.dt, "inputs": ", ".join(controller.inputs),
+                                         "measured": ", ".join(controller.outputs),
+                                         "tracked": ", ".join(controller.tracked), **info}])
+    rows = [{"scenario": c["scenario"], "spec": c["spec"], "value": _fmt(c["value"]),
+             "result": "n/a" if c["passed"] is None else ("met" if c["passed"] else "NOT MET")}
+            for c in verdict.checks]
+    marks = {(i, "result"): c["passed"] for i, c in enumerate(verdict.checks) if c["passed"] is not None}
+    report.add_table("Specs", rows, highlight=marks)
+    solve = verdict.solve_time_us()
+    keys = ("rise_time", "settling_time", "overshoot_pct", "iae", "steady_state_error", "peak_error", "input_peak",
+            "constraint_violations", "deadline_misses", "solve_time_median_us", "solve_time_p99_us",
+            "realtime_factor", "model_discrepancy_pct")
+    report.add_table("Figures per scenario", [{"scenario": s.name, **{k: _fmt(r.metrics.get(k)) for k in keys}}
+                                              for s, r in zip(verdict.scenarios, verdict.results, strict=True)],
+                     caption=f"controller compute time over all runs: median {solve['median']:.1f} µs, "
+                             f"p99 {solve['p99']:.1f} µs, max {solve['max']:.1f} µs")
+    pngs = []
+    for i, (scenario, result) in enumerate(zip(verdict.scenarios, verdict.results, strict=True), start=1):
+        png = plot_closed_loop(result, folder / f"closed_loop_{i}.png", title=scenario.name)
+        pngs.append(png)
+        caption = (f"status {result.status}; " + "; ".join(f"t={e['time']:.4g} s {e['kind']}: {e['message']}"
+                                                           for e in result.events[:5]))
+        report.add_figure(f"Scenario {i}: {scenario.name}", png, caption=caption)
+    if verdict.notes:
+        report.add_text("Notes", "\n\n".join(verdict.notes), note=True)
+    if robustness is not None:
+        worst = robustness.worst
+        report.add_text("Robustness (Monte Carlo)",
+                        f"{robustness.samples} plants drawn around the nominal one: pass rate "
+                        f"{robustness.pass_rate:.1%}. Worst case: "
+                        + ", ".join(f"{k}={v:.4g}" for k, v in worst["parameters"].items())
+                        + (" - " + "; ".join(worst["reasons"]) if worst["reasons"] else " (passed)"))
+        report.add_table(None, robustness.table.head(200).round(6))
+    return report.write(path), pngs
