@@ -37,7 +37,7 @@ from scipy.linalg import expm
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..files import check_file_format, write_text_atomic
-from .terms import Term, compile_rhs
+from .terms import Term, compile_rhs, compile_rk4
 
 __all__ = ["IdentifiedModel", "SimulationResult", "MODEL_FORMAT", "MODEL_VERSION", "DIVERGENCE_LIMIT"]
 
@@ -284,24 +284,14 @@ class IdentifiedModel:
     def _simulate_rk4(self, x: np.ndarray, u: np.ndarray, dt: float, nsub: int) -> tuple[str, int]:
         if nsub < 1:
             raise InvalidSettingError(f"nsub must be at least 1, got {nsub}")
-        f, h = self._rhs, dt / nsub
-        state = x[0].tolist()
-        n_x = len(state)
-        rng = range(n_x)
-        for k, row in enumerate(u.tolist()):
-            try:
-                for _ in range(nsub):
-                    k1 = f(state, row)
-                    k2 = f([state[i] + 0.5 * h * k1[i] for i in rng], row)
-                    k3 = f([state[i] + 0.5 * h * k2[i] for i in rng], row)
-                    k4 = f([state[i] + h * k3[i] for i in rng], row)
-                    state = [state[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]) for i in rng]
-            except (OverflowError, ValueError, ZeroDivisionError):
-                return "diverged", k
-            if not all(abs(v) < DIVERGENCE_LIMIT for v in state):  # also catches NaN
-                return "diverged", k
-            x[k + 1] = state
-        return "ok", u.shape[0]
+        run = self.__dict__.get("_rk4")
+        if run is None:  # generated on the first nonlinear simulation, then kept (terms.compile_rk4)
+            run = compile_rk4(self.states, self.inputs, self._parsed, self.coef)
+            object.__setattr__(self, "_rk4", run)
+        status, k, states = run(x[0].tolist(), u.tolist(), dt / nsub, nsub, DIVERGENCE_LIMIT)
+        if states:
+            x[1:len(states) + 1] = states
+        return status, k
 
     # ------------------------------------------------------------------ text and files
     def equations(self, precision: int = 6) -> list[str]:
