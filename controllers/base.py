@@ -347,7 +347,7 @@ class Controller(ABC):
         """The controller as a JSON-compatible dictionary (``kind``, ``settings``, ``info``)."""
         cls = type(self)
         data = {"format": CONTROLLER_FORMAT, "version": CONTROLLER_VERSION, "kind": self.kind,
-                "class": f"{cls.__module__}:{cls.__qualname__}",
+                "class": f"{_public_module(cls)}:{cls.__qualname__}",
                 "settings": _jsonable(self._settings()), "info": _jsonable(self.info)}
         if self.design_model is not None:
             data["design_model"] = self.design_model.to_dict()
@@ -363,6 +363,18 @@ class Controller(ABC):
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(dt={self.dt:g}, inputs={list(self.inputs)}, outputs={list(self.outputs)}, "
                 f"tracked={list(self.tracked)})")
+
+
+def _public_module(cls: type) -> str:
+    """The shortest module path below the top-level package that exposes `cls` (``controllers.pid`` for the
+    PID defined in ``controllers.pid.controller``): what saved files record, so that they outlive a split."""
+    import sys
+
+    module = cls.__module__
+    parent = module.rpartition(".")[0]
+    while "." in parent and getattr(sys.modules.get(parent), cls.__name__, None) is cls:
+        module, parent = parent, parent.rpartition(".")[0]
+    return module
 
 
 def _jsonable(value: Any) -> Any:

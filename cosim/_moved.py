@@ -60,6 +60,8 @@ MOVED: dict[str, tuple[str, ...]] = {
     "cosim.sweep": ("cosim.study.sweep",),
     "cosim.robustness": ("cosim.study.robustness",),
     "cosim.plots": ("cosim.figures", "cosim.data.plots", "cosim.loop.plots"),
+    "controllers.pid_tuning": ("controllers.pid",),
+    "controllers._qp_codegen": ("controllers.mpc._qp", "controllers.mpc._codegen"),
 }
 
 
@@ -74,10 +76,10 @@ class _MovedModule(types.ModuleType):
         return [importlib.import_module(t) for t in self._targets]
 
     def __getattr__(self, name: str) -> Any:
-        if name.startswith("__"):
-            raise AttributeError(name)
         if name == "__all__":
             return sorted({n for m in self._modules() for n in getattr(m, "__all__", ())})
+        if name.startswith("__"):
+            raise AttributeError(name)
         for module in self._modules():
             if hasattr(module, name):
                 return getattr(module, name)

@@ -39,6 +39,8 @@ def test_a_saved_controller_acts_as_before(name):
     ctrl.setpoint = [0.01] * len(ctrl.tracked)
     outs = [ctrl(k * ctrl.dt, 1e-3 * rng.standard_normal(len(ctrl.outputs))).tolist() for k in range(50)]
     np.testing.assert_allclose(outs, EXPECTED[name]["u"], rtol=1e-9, atol=1e-9)
+    # saved again, it is the same file: class paths stay the public ones ("controllers.pid:PID")
+    assert json.loads(load_controller(LEGACY / name).to_json()) == json.loads((LEGACY / name).read_text())
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])

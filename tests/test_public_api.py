@@ -41,6 +41,7 @@ def test_every_old_module_path_still_imports_its_names(old):
         module = importlib.import_module(old)
         values = {name: getattr(module, name) for name in BEFORE[old]}
     assert len(values) == len(BEFORE[old])
+    assert set(BEFORE[old]) <= set(module.__all__)  # so `from old.path import *` still works
     moved = [w for w in caught if issubclass(w.category, CosimDeprecationWarning)]
     if module.__name__ != old or not hasattr(module, "__file__"):  # a path that moved (not a room's own name)
         assert moved, f"no deprecation warning for {old}"

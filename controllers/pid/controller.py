@@ -1,4 +1,4 @@
-"""Discrete PID controller with setpoint weighting, filtered derivative, limits and anti-windup.
+"""The discrete PID controller (:class:`PID`): setpoint weighting, filtered derivative, limits, anti-windup.
 
 The control law (parallel form, Åström & Hägglund, *Advanced PID Control*, 2006, ch. 3 and 13; Åström &
 Wittenmark, *Computer-Controlled Systems*, 3rd ed., sect. 8.5) is, at sample ``t_k = t0 + k*dt``::
@@ -13,7 +13,7 @@ Wittenmark, *Computer-Controlled Systems*, 3rd ed., sect. 8.5) is, at sample ``t
 so the integral term is known before the measurement arrives and ``u_k`` depends on ``y_k`` only through
 multiplications and additions (no computational delay is added: ``u_k`` is held over ``[t_k, t_k + dt)``).
 In z the feedback part is ``C(z) = kp + ki*dt/(z - 1) + kd*(z - 1)/((tf + dt)*z - tf)``, which is exactly the
-controller :func:`~controllers.pid_tuning.tune_pid` designs with.
+controller :func:`~controllers.pid.tune_pid` designs with.
 
 **Derivative from a velocity sensor** (Åström & Hägglund, sect. 3.4; the usual servo structure). With
 ``velocity="omega_m"`` the derivative action is taken from a *measured* velocity ``v`` instead of the
@@ -28,11 +28,6 @@ its feedback damps the resonance that limits a PID on the load angle alone. In z
 
 With ``anti_windup="clamping"`` the integrator stops (conditional integration) while the output is limited
 and the error would drive it further into the limit; with ``anti_windup=None`` it integrates regardless.
-
-:func:`tune_pid` (in :mod:`controllers.pid_tuning`, re-exported here) designs the gains on a
-``control.StateSpace`` (continuous, sampled with zero-order hold, or discrete) for a phase margin or a
-crossover frequency, under gain-margin and modulus-margin constraints, and reports the achieved margins in
-``pid.info``.
 
 Examples
 --------
@@ -63,10 +58,9 @@ import numpy as np
 from cosim.errors import ControllerError, InvalidSettingError
 from cosim.numbers import finite_number as _finite
 
-from .base import Controller, register
-from .pid_tuning import tune_pid
+from ..base import Controller, register
 
-__all__ = ["ANTI_WINDUP", "PID", "tune_pid"]
+__all__ = ["ANTI_WINDUP", "PID"]
 
 #: Anti-windup methods of :class:`PID` (``None`` switches anti-windup off).
 ANTI_WINDUP = ("back-calculation", "clamping")
@@ -165,7 +159,7 @@ class PID(Controller):
         Tracking time constant of back-calculation [s], >= dt. Default ``sqrt(Ti*Td)``, or ``Ti`` without
         derivative action (Åström & Hägglund), or ``dt`` for a pure integral controller.
     info : mapping, optional
-        Design figures (filled by :func:`tune_pid`).
+        Design figures (filled by :func:`~controllers.pid.tune_pid`).
 
     Attributes
     ----------
