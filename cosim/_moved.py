@@ -41,7 +41,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "cosim._compile": ("cosim.plant.toolchain",),
     "cosim.trajectory": ("cosim.data.trajectory",),
     "cosim.signals": ("cosim.data.signals",),
-    "cosim.datafile": ("cosim.data.datafile",),
+    "cosim.datafile": ("cosim.data.datafile", "cosim.data.derivatives"),
     "cosim.simulation": ("cosim.data.simulation",),
     "cosim.identification": ("cosim.identify.sindyc", "cosim.study.cases"),
     "cosim.model": ("cosim.identify.model",),

@@ -3,17 +3,23 @@
 * :mod:`~cosim.data.trajectory` - :class:`Trajectory`, a record of named signals with units and roles, its CSV
   and Parquet files;
 * :mod:`~cosim.data.datafile` - :func:`load_data` for measured files (CSV, Parquet, ``.mat``) with column
-  expressions, and derivative estimation (:func:`differentiate`);
+  expressions, and :func:`check_excitation`;
+* :mod:`~cosim.data.derivatives` - derivative estimation (:func:`differentiate`, :data:`DERIVATIVE_METHODS`);
 * :mod:`~cosim.data.signals` - excitation signals (square, sine, PRBS, chirp, multisine...) and their specs;
 * :mod:`~cosim.data.simulation` - :func:`simulate`: an FMU driven by signals, recorded as a Trajectory;
 * :mod:`~cosim.data.plots` - :func:`plot_trajectory`.
+
+Modules whose names start with ``_`` hold the code of the public modules above, split by job (the signal
+classes, factories and spec form; a trajectory's checks and files; load_data's column expressions and file
+readers); import from the public modules or from ``cosim.data``.
 
 Imports the plant room and the foundation only.
 """
 
 from __future__ import annotations
 
-from .datafile import DERIVATIVE_METHODS, MIN_SAMPLES, UNIFORM_RTOL, check_excitation, differentiate, load_data
+from .datafile import MIN_SAMPLES, UNIFORM_RTOL, check_excitation, load_data
+from .derivatives import DERIVATIVE_METHODS, differentiate
 from .plots import plot_trajectory
 from .signals import (
     SIGNAL_KINDS,

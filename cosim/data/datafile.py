@@ -37,8 +37,12 @@ input that is constant (:func:`check_excitation`): all :class:`~cosim.errors.Dat
 Derivatives
 -----------
 ``derive=["qm"]`` adds ``qm_dot`` (and ``qm_ddot`` with ``derive_order=2``), computed from the sampled ``qm``
-by one of :data:`DERIVATIVE_METHODS` (see :func:`differentiate`). Inputs are zero-order held between samples
-everywhere in cosim; a resampled input is linearly interpolated at the new sample times, then held.
+by one of :data:`DERIVATIVE_METHODS` (see :func:`differentiate`; both live in :mod:`cosim.data.derivatives` and
+import from here too). Inputs are zero-order held between samples everywhere in cosim; a resampled input is
+linearly interpolated at the new sample times, then held.
+
+The columns' expressions are parsed in :mod:`~cosim.data._column_expressions` and the files read in
+:mod:`~cosim.data._measurement_files`; this module checks the record and puts it together.
 
 Examples
 --------
@@ -56,12 +60,9 @@ True
 
 from __future__ import annotations
 
-import ast
-import csv
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -69,8 +70,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
+from ._column_expressions import _evaluate, _parse_columns
+from ._measurement_files import _listing, _read_mat, _read_table, _vector
+from .derivatives import DERIVATIVE_METHODS, _method, differentiate
 from .trajectory import Trajectory
 
+# differentiate and DERIVATIVE_METHODS live in cosim.data.derivatives; they import from here too
 __all__ = ["load_data", "differentiate", "check_excitation", "DERIVATIVE_METHODS", "MIN_SAMPLES", "UNIFORM_RTOL"]
 
 #: Fewest samples a record may have: two give a time step, three a central difference.
@@ -79,176 +84,6 @@ MIN_SAMPLES = 3
 UNIFORM_RTOL = 1e-3
 
 _SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mat": "mat"})
-_TIME_NAMES = ("t", "time")
-_OPS: dict[type, Callable[[Any, Any], Any]] = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply,
-                                               ast.Div: np.divide}
-_EXPRESSION_HELP = ("write numbers and the file's variables joined by + - * /, e.g. force=gtau*vir or "
-                    "force=35.15*vir+pulses_N")
-
-
-# ------------------------------------------------------------------------------------------------ derivatives
-@dataclass(frozen=True)
-class _Method:
-    function: Callable[..., list[np.ndarray]]
-    defaults: Mapping[str, Any]
-    min_samples: Callable[..., int]
-    summary: str
-
-
-def _check_int(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise InvalidSettingError(f"{name} must be an integer >= {low}, got {value!r}")
-    return int(value)
-
-
-def _savgol(x: np.ndarray, dt: float, order: int, *, window: int, polyorder: int) -> list[np.ndarray]:
-    from scipy.signal import savgol_filter
-
-    return [savgol_filter(x, window, polyorder, deriv=k, delta=dt, mode="interp") for k in range(1, order + 1)]
-
-
-def _savgol_min(order: int, *, window: int, polyorder: int) -> int:
-    window = _check_int("savitzky_golay window", window, 3)
-    polyorder = _check_int("savitzky_golay polyorder", polyorder, 1)
-    if window % 2 == 0:
-        raise InvalidSettingError(f"savitzky_golay window must be odd (samples centred on the point), got {window}")
-    if not order <= polyorder < window:
-        raise InvalidSettingError(f"savitzky_golay needs derive_order ({order}) <= polyorder ({polyorder}) < "
-                                  f"window ({window}); raise the polyorder or the window")
-    return window
-
-
-def _butterworth(x: np.ndarray, dt: float, order: int, *, cutoff: float | None, filter_order: int
-                 ) -> list[np.ndarray]:
-    from scipy.signal import butter, sosfiltfilt
-
-    cutoff = 0.1 / dt if cutoff is None else float(cutoff)
-    if not 0.0 < cutoff < 0.5 / dt:
-        raise InvalidSettingError(f"butterworth cutoff must lie between 0 and the Nyquist frequency "
-                                  f"{0.5 / dt:g} Hz, got {cutoff:g} Hz")
-    sos = butter(filter_order, cutoff, fs=1.0 / dt, output="sos")
-    smooth = sosfiltfilt(sos, x)
-    out = [np.gradient(smooth, dt)]
-    if order == 2:
-        out.append(np.gradient(out[0], dt))
-    return out
-
-
-def _butterworth_min(order: int, *, cutoff: float | None, filter_order: int) -> int:
-    filter_order = _check_int("butterworth filter_order", filter_order, 1)
-    if cutoff is not None and (isinstance(cutoff, bool) or not isinstance(cutoff, (int, float, np.floating))
-                               or not math.isfinite(cutoff)):
-        raise InvalidSettingError(f"butterworth cutoff must be a frequency in Hz, got {cutoff!r}")
-    sections = (filter_order + 1) // 2
-    return 3 * (2 * sections + 1) + 1  # scipy's sosfiltfilt pads 3 * (2 * sections + 1) samples at each end
-
-
-def _finite_difference(x: np.ndarray, dt: float, order: int) -> list[np.ndarray]:
-    out = [np.gradient(x, dt, edge_order=2)]
-    if order == 2:
-        out.append(np.gradient(out[0], dt, edge_order=2))
-    return out
-
-
-#: Differentiators by name: what each does, its options and their defaults.
-DERIVATIVE_METHODS: Mapping[str, _Method] = MappingProxyType({
-    "savitzky_golay": _Method(
-        _savgol, MappingProxyType({"window": 21, "polyorder": 3}), _savgol_min,
-        "least-squares polynomial of degree `polyorder` (3) over a centred window of `window` samples (21; "
-        "the first and last windows at the ends), differentiated at each sample (scipy.signal.savgol_filter)"),
-    "butterworth": _Method(
-        _butterworth, MappingProxyType({"cutoff": None, "filter_order": 4}), _butterworth_min,
-        "zero-phase Butterworth low-pass of order `filter_order` (4) at `cutoff` Hz (default a tenth of the "
-        "sampling rate), run forward and backward (scipy.signal.sosfiltfilt), then central differences "
-        "(numpy.gradient, applied twice for the second derivative): the EMPS reference's band-pass filtering"),
-    "finite_difference": _Method(
-        _finite_difference, MappingProxyType({}), lambda order: 3,
-        "central differences without smoothing (numpy.gradient, second-order one-sided at the ends): exact for "
-        "clean data, amplifies noise by about 1/dt"),
-})
-
-
-def _method(method: str, options: Mapping[str, Any] | None, order: int) -> tuple[_Method, dict[str, Any], int]:
-    if method not in DERIVATIVE_METHODS:
-        raise InvalidSettingError(f"unknown derive_method {method!r}; expected one of "
-                                  f"{', '.join(DERIVATIVE_METHODS)}")
-    if isinstance(order, bool) or order not in (1, 2):
-        raise InvalidSettingError(f"derive_order must be 1 (velocity) or 2 (velocity and acceleration), "
-                                  f"got {order!r}")
-    entry = DERIVATIVE_METHODS[method]
-    options = dict(options or {})
-    unknown = [k for k in options if k not in entry.defaults]
-    if unknown:
-        allowed = ", ".join(entry.defaults) or "none"
-        raise InvalidSettingError(f"derive_method {method!r} has no option {unknown[0]!r}; its options: {allowed}")
-    options = {**entry.defaults, **options}
-    return entry, options, entry.min_samples(order, **options)
-
-
-def differentiate(x: Sequence[float] | np.ndarray, dt: float, *, order: int = 1, method: str = "savitzky_golay",
-                  options: Mapping[str, Any] | None = None) -> tuple[np.ndarray, ...]:
-    """Time derivatives of a uniformly sampled signal: ``(dx/dt,)`` or ``(dx/dt, d2x/dt2)``.
-
-    Methods (:data:`DERIVATIVE_METHODS`, options in brackets with their defaults):
-
-    * ``"savitzky_golay"`` (``window=21`` samples, ``polyorder=3``): a cubic fitted by least squares over the
-      21 samples centred on each sample (the first and last 21 at the ends), differentiated there
-      (``scipy.signal.savgol_filter``). Its -3 dB bandwidth is about ``(polyorder + 1) / (3.2 * window - 4.6)``
-      times the Nyquist frequency: 73 Hz at 1 kHz with the defaults.
-    * ``"butterworth"`` (``cutoff=fs/10`` Hz, ``filter_order=4``): zero-phase Butterworth low-pass (forward and
-      backward, ``scipy.signal.sosfiltfilt``), then central differences (``numpy.gradient``, applied twice for
-      the second derivative). This is the band-pass filtering of the robotics identification practice (the
-      EMPS benchmark's reference method), with the rule of thumb cutoff >= 5 x the closed-loop bandwidth.
-    * ``"finite_difference"``: central differences, no smoothing; for clean data.
-
-    Parameters
-    ----------
-    x : array_like, shape (n,)
-        Samples, finite, uniformly spaced in time.
-    dt : float
-        Sampling step in s.
-    order : {1, 2}
-        Highest derivative returned.
-    method : str
-        One of :data:`DERIVATIVE_METHODS`.
-    options : mapping, optional
-        The method's options (see above); others are refused.
-
-    Returns
-    -------
-    tuple of ndarray
-        The first derivative, and the second with ``order=2``.
-
-    Raises
-    ------
-    InvalidSettingError
-        Unknown method or option, bad option value, order not 1 or 2, dt not positive.
-    DataError
-        `x` not a finite 1-D array, or shorter than the method needs (the message says the minimum).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> t = np.arange(101) * 0.01
-    >>> v, a = differentiate(t**3, 0.01, order=2, method="savitzky_golay")
-    >>> bool(np.allclose(v, 3 * t**2)), bool(np.allclose(a, 6 * t))
-    (True, True)
-    >>> differentiate(np.sin(t), 0.01, method="butterworth", options={"cutoff": 5.0})[0][50].round(3)
-    np.float64(0.878)
-    """
-    entry, options, minimum = _method(method, options, order)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not (math.isfinite(dt) and dt > 0):
-        raise InvalidSettingError(f"dt must be a positive time step in s, got {dt!r}")
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 1:
-        raise DataError(f"differentiate takes one signal, a 1-D array; got shape {x.shape}")
-    if not np.all(np.isfinite(x)):
-        row = int(np.argmin(np.isfinite(x)))
-        raise DataError(f"the signal is {x[row]} at sample {row}; differentiate finite samples only")
-    if x.size < minimum:
-        raise DataError(f"the signal has {x.size} samples; {method} needs at least {minimum} "
-                        f"(options {options}); use a longer record or a smaller window")
-    return tuple(np.asarray(d, dtype=float) for d in entry.function(x, float(dt), order, **options))
 
 
 # ------------------------------------------------------------------------------------------------ excitation
@@ -294,223 +129,6 @@ excite the system (steps, a multisine) or drop that input
             raise DataError(f"input {name!r} is constant: nothing to identify from (it is {column[0]:g} over the "
                             "whole record); excite the system (steps, a multisine) or drop that input")
     return traj
-
-
-# ------------------------------------------------------------------------------------------------ columns
-@dataclass(frozen=True)
-class _Column:
-    name: str
-    text: str
-    tree: ast.Expression
-
-    @property
-    def variables(self) -> tuple[str, ...]:
-        seen: dict[str, None] = {}
-        for node in ast.walk(self.tree):
-            if isinstance(node, ast.Name):
-                seen.setdefault(node.id, None)
-        return tuple(seen)
-
-    @property
-    def plain(self) -> bool:
-        """The column is a variable of the file, not an expression."""
-        return isinstance(self.tree.body, ast.Name)
-
-    def describe(self) -> str:
-        return self.name if self.plain and self.text == self.name else f"{self.name}={self.text}"
-
-
-def _check_node(node: ast.AST, spec: str) -> None:
-    if isinstance(node, ast.Expression):
-        _check_node(node.body, spec)
-    elif isinstance(node, ast.BinOp) and type(node.op) in _OPS:
-        _check_node(node.left, spec)
-        _check_node(node.right, spec)
-    elif isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-        _check_node(node.operand, spec)
-    elif isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
-        pass
-    elif isinstance(node, ast.Name):
-        pass
-    else:
-        raise InvalidSettingError(f"column {spec!r}: {ast.unparse(node)!r} is not allowed; {_EXPRESSION_HELP}")
-
-
-def _parse_column(name: str, text: str, spec: str) -> _Column:
-    name, text = str(name).strip(), str(text).strip()
-    if not name.isidentifier() or name == "time":
-        raise InvalidSettingError(f"column {spec!r}: {name!r} is not a usable name; use letters, digits and _ "
-                                  "(not 'time'), e.g. force=gtau*vir")
-    try:
-        tree = ast.parse(text, mode="eval")
-    except SyntaxError:
-        raise InvalidSettingError(f"column {spec!r}: {text!r} is not an expression; {_EXPRESSION_HELP}") from None
-    _check_node(tree, spec)
-    return _Column(name, text, tree)
-
-
-def _plain_column(name: str) -> _Column:
-    """A column that is a variable of the file, whatever its name (a CSV header may say "motor speed")."""
-    name = str(name).strip()
-    if not name or name == "time":
-        raise InvalidSettingError(f"column {name!r} is not a usable name; 'time' and '' are reserved, rename it "
-                                  "with new_name=variable")
-    return _Column(name, name, ast.Expression(body=ast.Name(id=name, ctx=ast.Load())))
-
-
-def _parse_columns(columns: Mapping[str, str] | Sequence[str] | str) -> list[_Column]:
-    if isinstance(columns, Mapping):
-        parsed = [_plain_column(name) if str(text).strip() == str(name).strip() else
-                  _parse_column(name, text, f"{name}={text}") for name, text in columns.items()]
-    else:
-        items = [columns] if isinstance(columns, str) else list(columns)
-        parsed = []
-        for item in items:
-            if not isinstance(item, str):
-                raise InvalidSettingError(f"columns must be names or 'name=expression' strings, got {item!r}")
-            name, sep, text = item.partition("=")
-            parsed.append(_parse_column(name, text, item) if sep else _plain_column(item))
-    if not parsed:
-        raise InvalidSettingError("columns is empty; name at least one column, e.g. columns=['qm', 'force=gtau*vir']")
-    names = [c.name for c in parsed]
-    repeated = sorted({n for n in names if names.count(n) > 1})
-    if repeated:
-        raise InvalidSettingError(f"column name {repeated[0]!r} is given twice; give each column one name")
-    return parsed
-
-
-def _evaluate(node: ast.AST, env: Mapping[str, float | np.ndarray]) -> float | np.ndarray:
-    if isinstance(node, ast.Expression):
-        return _evaluate(node.body, env)
-    if isinstance(node, ast.BinOp):
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return _OPS[type(node.op)](_evaluate(node.left, env), _evaluate(node.right, env))
-    if isinstance(node, ast.UnaryOp):
-        value = _evaluate(node.operand, env)
-        return -value if isinstance(node.op, ast.USub) else value
-    if isinstance(node, ast.Constant):
-        return float(node.value)
-    return env[node.id]  # type: ignore[attr-defined]  # names only, checked by _check_node
-
-
-# ------------------------------------------------------------------------------------------------ reading
-@dataclass
-class _Raw:
-    """What a file gave: its variables (name -> ndarray as stored), time name, units, roles, meta."""
-
-    variables: dict[str, np.ndarray]
-    time: str
-    units: dict[str, str]
-    roles: dict[str, str]
-    meta: dict[str, Any]
-
-
-def _listing(names: Sequence[str]) -> str:
-    return ", ".join(names) or "(nothing)"
-
-
-def _time_name(path: Path, names: Sequence[str], time: str | None) -> str:
-    candidates = _TIME_NAMES if time is None else (time,)
-    for name in candidates:
-        if name in names:
-            return name
-    wanted = " or ".join(repr(c) for c in candidates)
-    raise UnknownVariableError(f"{path.name} has no time variable {wanted}; it has: {_listing(names)}; "
-                               "pass time=<name of the time variable> (--time on the command line)")
-
-
-def _missing(path: Path, names: Sequence[str], columns: Sequence[_Column]) -> None:
-    for column in columns:
-        for var in column.variables:
-            if var not in names:
-                raise UnknownVariableError(f"{path.name} has no variable {var!r} (column {column.describe()!r}); "
-                                           f"it has: {_listing(names)}; check the spelling")
-
-
-def _read_mat(path: Path, time: str | None, columns: list[_Column] | None) -> tuple[_Raw, list[_Column]]:
-    import scipy.io
-
-    try:
-        data = scipy.io.loadmat(path)
-    except NotImplementedError:
-        raise DataError(f"{path.name} is a MATLAB v7.3 (HDF5) file, which cosim does not read; re-save it in "
-                        f"MATLAB with save('{path.name}', ..., '-v7') or export it as CSV") from None
-    except Exception as exc:  # scipy raises many types (MatReadError, ValueError, IndexError...) on a bad file
-        reason = " ".join(str(exc).split())
-        raise DataError(f"cannot read {path.name} as a MATLAB file ({reason}); expected a .mat file saved "
-                        "with MATLAB's save (version 7 or older)") from None
-    variables = {k: v for k, v in data.items() if not k.startswith("__")}
-    names = list(variables)
-    time_name = _time_name(path, names, time)
-    n = _vector(path, time_name, variables[time_name], None).size
-    if columns is None:
-        columns = [_plain_column(name) for name in names
-                   if name != time_name and _is_numeric(variables[name]) and np.size(variables[name]) == n
-                   and np.ndim(np.squeeze(variables[name])) == 1]
-        if not columns:
-            raise DataError(f"{path.name} has no vector of {n} samples besides {time_name!r}; it has: "
-                            f"{_listing(names)}")
-    _missing(path, names, columns)
-    return _Raw(variables, time_name, {}, {}, {}), columns
-
-
-def _is_numeric(value: Any) -> bool:
-    return isinstance(value, np.ndarray) and value.dtype.kind in "fiub"
-
-
-def _vector(path: Path, name: str, value: Any, n: int | None, time_name: str = "") -> np.ndarray:
-    """`value` as a float vector of `n` samples (any length when `n` is None), or a float for a scalar."""
-    shape = getattr(value, "shape", ())
-    if not _is_numeric(value):
-        kind = type(value).__name__ if not isinstance(value, np.ndarray) else f"{value.dtype} array"
-        raise DataError(f"variable {name!r} of {path.name} is a {kind}, not numbers; use a numeric vector")
-    squeezed = np.squeeze(np.asarray(value, dtype=float))
-    if n is not None and squeezed.ndim == 0:
-        return squeezed  # a scalar, broadcast over time
-    if squeezed.ndim != 1:
-        expected = f"a vector of {n} samples like {time_name!r} or a scalar" if n else "a vector"
-        raise DataError(f"variable {name!r} of {path.name} has shape {shape}; expected {expected}")
-    if n is not None and squeezed.size != n:
-        raise DataError(f"variable {name!r} of {path.name} has {squeezed.size} samples, expected {n} like "
-                        f"{time_name!r}; use variables recorded on the same time base")
-    return squeezed
-
-
-def _table_names(path: Path, kind: str) -> list[str]:
-    if kind == "parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        try:
-            return list(pq.read_schema(path).names)
-        except (pa.ArrowException, OSError) as exc:
-            reason = " ".join(str(exc).split())
-            raise DataError(f"cannot read {path.name} as Parquet ({reason}); expected a Parquet table") from None
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as handle:
-            for line in handle:
-                if not line.startswith("#"):
-                    return [name.strip() for name in next(csv.reader([line]))]
-    except UnicodeDecodeError:
-        raise DataError(f"cannot read {path.name} as CSV (not UTF-8 text); expected a header row then numbers"
-                        ) from None
-    raise DataError(f"{path.name} has no header row; expected a header row (time and signal names) then numbers")
-
-
-def _read_table(path: Path, kind: str, time: str | None, columns: list[_Column] | None
-                ) -> tuple[_Raw, list[_Column]]:
-    names = _table_names(path, kind)
-    time_name = _time_name(path, names, time)
-    if columns is None:
-        columns = [_plain_column(name) for name in names if name != time_name]
-    _missing(path, names, columns)
-    needed = list(dict.fromkeys(v for c in columns for v in c.variables if v != time_name))
-    traj = Trajectory.read(path, time=time_name, columns=needed)
-    variables = {name: traj[name] for name in traj.names}
-    variables[time_name] = traj.time
-    units = dict(zip(traj.names, traj.units, strict=True))
-    roles = dict(zip(traj.names, traj.roles, strict=True))
-    return _Raw(variables, time_name, units, roles, dict(traj.meta)), columns
 
 
 # ------------------------------------------------------------------------------------------------ time

@@ -20,7 +20,6 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..errors import InvalidSettingError, UnknownVariableError
 from ..plant.fmu_plant import FmuPlant
@@ -159,6 +158,8 @@ def simulate(
             u[:, j] = sample_input(name, inputs[name], t, maximum=maximum) if name in inputs else start_values[j]
         y = np.empty((n + 1, len(plant.outputs)))
         y[0] = plant.read_outputs()
+        from tqdm.auto import tqdm  # tqdm.auto costs tens of ms to import (asyncio): only when simulating
+
         # disable=None lets tqdm show the bar only on a terminal
         disable = (None if n >= _PROGRESS_MIN_STEPS else True) if progress is None else not progress
         with tqdm(total=n, unit="step", desc=f"simulate {plant.path.stem}", disable=disable, leave=False) as bar:

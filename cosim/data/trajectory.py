@@ -13,6 +13,9 @@ shows as a note). Parquet (``.parquet``, ``.pq``): columns ``time``, ``<name>``.
 as float64, the same JSON (with ``"version": 1``) under the schema metadata key ``cosim-trajectory``.
 Plain files from other tools (a header with a time column, or a Parquet table) read too; their roles are
 ``"output"`` unless given. Writes are atomic: a temporary file in the same folder, then a rename.
+
+The checks of a trajectory's fields are in :mod:`~cosim.data._trajectory_checks`, the readers and writers of
+its files in :mod:`~cosim.data._trajectory_files` (pandas and pyarrow are imported there when a file is used).
 """
 
 from __future__ import annotations
@@ -21,63 +24,23 @@ import json
 import math
 import numbers
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
-from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
-from ..files import atomic_output
+from ..errors import DataError, InvalidSettingError, UnknownVariableError
+from ._trajectory_checks import _TIME, ROLES, _as_names, checked_fields
+from ._trajectory_files import _file_kind, read_file, write_csv, write_parquet
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["Trajectory", "ROLES"]
 
-#: The roles a signal can have.
-ROLES = ("state", "input", "output", "reference")
-
-_TIME = "time"
-_FORMAT = "cosim-trajectory"
-_VERSION = 1
-_CSV_PREFIX = f"# {_FORMAT} v"
-_PARQUET_KEY = _FORMAT.encode()
-_SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet"})
 _NOISE_CONVENTION = "gaussian, std = level x std of the clean signal, independent per signal"
-# pandas < 3 parses floats with a fast, not always exact parser unless asked; pandas 3 is exact by default
-_PANDAS_MAJOR = int(pd.__version__.split(".")[0])
-_CSV_READ_OPTIONS: dict[str, Any] = {"float_precision": "round_trip"} if _PANDAS_MAJOR < 3 else {}
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
-def _normalise_meta(meta: Mapping[str, Any] | None) -> dict[str, Any]:
-    if meta is None:
-        return {}
-    if not isinstance(meta, Mapping):
-        raise DataError(f"meta must be a dict, got {type(meta).__name__}; pass a JSON-serialisable dict")
-    try:
-        return json.loads(json.dumps(dict(meta), default=_json_default))
-    except (TypeError, ValueError) as exc:
-        raise DataError(f"meta is not JSON-serialisable ({exc}); keep it to str, numbers, lists and dicts"
-                        ) from None
-
-
-def _as_names(names: str | Iterable[str]) -> tuple[str, ...]:
-    return (names,) if isinstance(names, str) else tuple(names)
-
-
-def _fmt_time(t: float) -> str:
-    return f"{t:.9g}"
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -131,56 +94,8 @@ class Trajectory:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        names = _as_names(self.names)
-        bad = [name for name in names if not isinstance(name, str) or not name or name == _TIME]
-        if bad:
-            raise DataError(f"signal names must be non-empty strings other than {_TIME!r}, got {bad[0]!r}; "
-                            "rename that signal")
-        repeated = sorted({name for name in names if names.count(name) > 1})
-        if repeated:
-            raise DataError(f"signal names must be unique, repeated: {', '.join(repeated)}; rename them")
-        m = len(names)
-        try:
-            time = np.array(self.time, dtype=float)
-            values = np.array(self.values, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise DataError(f"time and values must be numeric arrays ({exc}); convert the data to floats"
-                            ) from None
-        if time.ndim != 1 or time.size == 0:
-            raise DataError(f"time must be a non-empty 1-D array, got shape {time.shape}; "
-                            "pass one time per sample")
-        n = time.size
-        if values.shape != (n, m):
-            raise DataError(f"values has shape {values.shape}, expected (n_samples, n_signals) = ({n}, {m}); "
-                            "pass one row per time and one column per name")
-        finite = np.isfinite(time)
-        if not finite.all():
-            i = int(np.argmin(finite))
-            raise DataError(f"time is {time[i]} at index {i}; expected finite times in s; drop that row")
-        steps = np.diff(time)
-        if (steps <= 0).any():
-            i = int(np.argmax(steps <= 0)) + 1
-            raise DataError(f"time is not strictly increasing at index {i} (t={_fmt_time(time[i])} s after "
-                            f"{_fmt_time(time[i - 1])} s); sort the rows and drop repeated times")
-        finite = np.isfinite(values)
-        if not finite.all():
-            row = int(np.argmin(finite.all(axis=1)))
-            col = int(np.argmin(finite[row]))
-            raise DataError(f"signal {names[col]!r} is {values[row, col]} at t={_fmt_time(time[row])} s "
-                            f"(row {row}); expected finite values; drop or fill the bad samples")
-        units = ("",) * m if self.units is None else tuple(_as_names(self.units))
-        roles = ("output",) * m if self.roles is None else tuple(_as_names(self.roles))
-        if len(units) != m or not all(isinstance(u, str) for u in units):
-            raise DataError(f"units must be {m} strings, one per signal, got {units!r}; use '' when unknown")
-        if len(roles) != m:
-            raise DataError(f"roles must be {m} strings, one per signal, got {roles!r}")
-        unknown = [role for role in roles if role not in ROLES]
-        if unknown:
-            raise InvalidSettingError(f"unknown role {unknown[0]!r}; expected one of {', '.join(ROLES)}")
-        time.setflags(write=False)
-        values.setflags(write=False)
-        for name, value in (("time", time), ("values", values), ("names", names), ("units", units),
-                            ("roles", roles), ("meta", _normalise_meta(self.meta))):
+        fields = checked_fields(self.time, self.values, self.names, self.units, self.roles, self.meta)
+        for name, value in zip(("time", "values", "names", "units", "roles", "meta"), fields, strict=True):
             object.__setattr__(self, name, value)
 
     # construction ----------------------------------------------------------------------------------------
@@ -485,6 +400,8 @@ class Trajectory:
         >>> df.index.name, list(df.columns), df.attrs["units"]
         ('time', ['y'], {'y': 'm'})
         """
+        import pandas as pd
+
         frame = pd.DataFrame(self.values.copy(), index=pd.Index(self.time.copy(), name=_TIME),
                              columns=list(self.names))
         frame.attrs = {"units": dict(zip(self.names, self.units, strict=True)),
@@ -508,10 +425,6 @@ class Trajectory:
                 "meta": json.loads(json.dumps(self.meta))}
 
     # files -----------------------------------------------------------------------------------------------
-    def _header(self) -> dict[str, Any]:
-        return {"units": dict(zip(self.names, self.units, strict=True)),
-                "roles": dict(zip(self.names, self.roles, strict=True)), "meta": self.meta}
-
     def to_csv(self, path: str | os.PathLike) -> Path:
         """Write a CSV file atomically and return its path (format: see the module docstring).
 
@@ -528,12 +441,7 @@ class Trajectory:
         1.0,2.0
         <BLANKLINE>
         """
-        frame = pd.DataFrame(self.values, columns=list(self.names))
-        frame.insert(0, _TIME, self.time)
-        with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
-            handle.write(f"{_CSV_PREFIX}{_VERSION} {json.dumps(self._header())}\n")
-            frame.to_csv(handle, index=False, lineterminator="\n")
-        return Path(path)
+        return write_csv(self, path)
 
     def to_parquet(self, path: str | os.PathLike) -> Path:
         """Write a Parquet file atomically and return its path (format: see the module docstring).
@@ -547,16 +455,7 @@ class Trajectory:
         >>> Trajectory.read(path) == traj
         True
         """
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        columns = [pa.array(self.time)] + [pa.array(self.values[:, i]) for i in range(len(self.names))]
-        table = pa.Table.from_arrays(columns, names=[_TIME, *self.names])
-        header = json.dumps({"version": _VERSION, **self._header()}).encode()
-        table = table.replace_schema_metadata({_PARQUET_KEY: header})
-        with atomic_output(path) as tmp:
-            pq.write_table(table, tmp)
-        return Path(path)
+        return write_parquet(self, path)
 
     def write(self, path: str | os.PathLike) -> Path:
         """Write to `path` atomically, as CSV (``.csv``) or Parquet (``.parquet``, ``.pq``); return the path.
@@ -618,14 +517,7 @@ class Trajectory:
         (('torque', 'angle'), ('input', 'output'))
         """
         path = Path(path)
-        kind = _file_kind(path)
-        if not path.is_file():
-            what = "is a folder, not a file" if path.is_dir() else "does not exist"
-            raise FmuNotFoundError(f"data file {path} {what}; expected a .csv or .parquet file; "
-                                   "check the path")
-        wanted = None if columns is None else [c for c in _as_names(columns) if c != time]
-        reader = _read_csv if kind == "csv" else _read_parquet
-        t, data, header = reader(path, time, wanted)
+        t, data, header = read_file(path, time, columns)
         roles = dict(roles or {})
         extra = [name for name in roles if name not in data]
         if extra:
@@ -635,108 +527,3 @@ class Trajectory:
         return cls.from_arrays(t, data, units={name: str(file_units.get(name, "")) for name in data},
                                roles={name: roles.get(name, file_roles.get(name, "output")) for name in data},
                                meta=header.get("meta", {}))
-
-
-def _file_kind(path: Path) -> str:
-    kind = _SUFFIXES.get(path.suffix.lower())
-    if kind is None:
-        raise InvalidSettingError(f"cannot tell the format of {path.name!r} from its suffix; "
-                                  "use .csv, .parquet or .pq")
-    return kind
-
-
-def _check_columns(path: Path, present: Sequence[str], time: str, wanted: Sequence[str] | None) -> list[str]:
-    listing = ", ".join(present) or "(none)"
-    if time not in present:
-        raise DataError(f"{path.name} has no time column {time!r}; columns present: {listing}; "
-                        "pass time=<name of the time column>")
-    if wanted is None:
-        return [c for c in present if c != time]
-    missing = [c for c in wanted if c not in present]
-    if missing:
-        raise DataError(f"{path.name} lacks column(s) {', '.join(missing)}; columns present: {listing}; "
-                        "check the names")
-    return list(wanted)
-
-
-def _numeric(path: Path, name: str, column: pd.Series) -> np.ndarray:
-    if column.dtype.kind in "fiub":
-        return column.to_numpy(dtype=float, na_value=np.nan)
-    converted = pd.to_numeric(column, errors="coerce")
-    bad = converted.isna() & column.notna()
-    if bad.any():
-        row = int(np.argmax(bad.to_numpy()))
-        raise DataError(f"column {name!r} of {path.name} holds {column.iloc[row]!r} at data row {row}; "
-                        "expected numbers; fix or drop that column")
-    return converted.to_numpy(dtype=float, na_value=np.nan)
-
-
-def _read_csv(path: Path, time: str, wanted: Sequence[str] | None
-              ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    header: dict[str, Any] = {}
-    skip = 0
-    with open(path, encoding="utf-8-sig") as handle:
-        for line in handle:
-            if not line.startswith("#"):
-                break
-            if skip == 0 and line.startswith(_CSV_PREFIX):
-                version, _, body = line[len(_CSV_PREFIX):].partition(" ")
-                header = _parse_header(path, version, body)
-            skip += 1
-    try:
-        present = list(pd.read_csv(path, skiprows=skip, nrows=0, encoding="utf-8-sig").columns)
-        names = _check_columns(path, present, time, wanted)
-        frame = pd.read_csv(path, skiprows=skip, usecols=[time, *names], encoding="utf-8-sig",
-                            **_CSV_READ_OPTIONS)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
-        if isinstance(exc, DataError):
-            raise
-        reason = " ".join(str(exc).split())
-        raise DataError(f"cannot read {path.name} as CSV ({reason}); expected a header row then numbers"
-                        ) from None
-    data = {name: _numeric(path, name, frame[name]) for name in names}
-    return _numeric(path, time, frame[time]), data, header
-
-
-def _parse_header(path: Path, version: Any, body: str | bytes) -> dict[str, Any]:
-    """The JSON of units, roles and meta, for a file of format version `version`."""
-    try:
-        header = json.loads(body) if str(version).strip() == str(_VERSION) else None
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        header = None
-    if not isinstance(header, dict):
-        raise DataError(f"{path.name} has an unreadable {_FORMAT} header (version {str(version).strip()!r}); "
-                        f"expected version {_VERSION} with JSON; rewrite the file with this cosim")
-    return header
-
-
-def _read_parquet(path: Path, time: str, wanted: Sequence[str] | None
-                  ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    try:
-        schema = pq.read_schema(path)
-        names = _check_columns(path, schema.names, time, wanted)
-        table = pq.read_table(path, columns=[time, *names])
-    except (pa.ArrowException, OSError) as exc:
-        reason = " ".join(str(exc).split())
-        raise DataError(f"cannot read {path.name} as Parquet ({reason}); expected a Parquet table") from None
-    raw = (schema.metadata or {}).get(_PARQUET_KEY)
-    header: dict[str, Any] = {}
-    if raw is not None:
-        try:
-            version = json.loads(raw).get("version", "?")
-        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
-            version = "?"
-        header = _parse_header(path, version, raw)
-
-    def column(name: str) -> np.ndarray:
-        chunked = table.column(name)
-        if not (pa.types.is_floating(chunked.type) or pa.types.is_integer(chunked.type)
-                or pa.types.is_boolean(chunked.type) or pa.types.is_decimal(chunked.type)):
-            raise DataError(f"column {name!r} of {path.name} has type {chunked.type}; expected numbers "
-                            "(time in s as a number); convert or drop that column")
-        return np.asarray(chunked.to_numpy(zero_copy_only=False), dtype=float)
-
-    return column(time), {name: column(name) for name in names}, header

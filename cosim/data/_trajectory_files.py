@@ -1,0 +1,198 @@
+"""The files of a :class:`~cosim.data.trajectory.Trajectory`: CSV and Parquet, written and read.
+
+The formats are described in :mod:`cosim.data.trajectory`. Writers take a trajectory and write atomically
+(:func:`~cosim.files.atomic_output`); :func:`read_file` gives the time column, the signals and the cosim header
+(units, roles, meta) of a cosim file or of another tool's table, for :meth:`Trajectory.read` to build from.
+pandas and pyarrow are imported when a file is written or read, not with cosim.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import DataError, FmuNotFoundError, InvalidSettingError
+from ..files import atomic_output
+from ._trajectory_checks import _TIME, _as_names
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from .trajectory import Trajectory
+
+__all__ = ["read_file", "write_csv", "write_parquet"]
+
+_FORMAT = "cosim-trajectory"
+_VERSION = 1
+_CSV_PREFIX = f"# {_FORMAT} v"
+_PARQUET_KEY = _FORMAT.encode()
+_SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet"})
+
+
+@functools.cache
+def _csv_read_options() -> dict[str, Any]:
+    """Options of ``pandas.read_csv`` that read floats back exactly, for the installed pandas."""
+    import pandas as pd
+
+    # pandas < 3 parses floats with a fast, not always exact parser unless asked; pandas 3 is exact by default
+    return {"float_precision": "round_trip"} if int(pd.__version__.split(".")[0]) < 3 else {}
+
+
+def _header(traj: Trajectory) -> dict[str, Any]:
+    return {"units": dict(zip(traj.names, traj.units, strict=True)),
+            "roles": dict(zip(traj.names, traj.roles, strict=True)), "meta": traj.meta}
+
+
+def write_csv(traj: Trajectory, path: str | os.PathLike) -> Path:
+    """Write `traj` to a CSV file atomically and return its path."""
+    import pandas as pd
+
+    frame = pd.DataFrame(traj.values, columns=list(traj.names))
+    frame.insert(0, _TIME, traj.time)
+    with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
+        handle.write(f"{_CSV_PREFIX}{_VERSION} {json.dumps(_header(traj))}\n")
+        frame.to_csv(handle, index=False, lineterminator="\n")
+    return Path(path)
+
+
+def write_parquet(traj: Trajectory, path: str | os.PathLike) -> Path:
+    """Write `traj` to a Parquet file atomically and return its path."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    columns = [pa.array(traj.time)] + [pa.array(traj.values[:, i]) for i in range(len(traj.names))]
+    table = pa.Table.from_arrays(columns, names=[_TIME, *traj.names])
+    header = json.dumps({"version": _VERSION, **_header(traj)}).encode()
+    table = table.replace_schema_metadata({_PARQUET_KEY: header})
+    with atomic_output(path) as tmp:
+        pq.write_table(table, tmp)
+    return Path(path)
+
+
+def read_file(path: Path, time: str, columns: str | Sequence[str] | None
+              ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    """Time, signals (all, or `columns` in that order) and cosim header (``{}`` for a plain file) of `path`."""
+    kind = _file_kind(path)
+    if not path.is_file():
+        what = "is a folder, not a file" if path.is_dir() else "does not exist"
+        raise FmuNotFoundError(f"data file {path} {what}; expected a .csv or .parquet file; "
+                               "check the path")
+    wanted = None if columns is None else [c for c in _as_names(columns) if c != time]
+    reader = _read_csv if kind == "csv" else _read_parquet
+    return reader(path, time, wanted)
+
+
+def _file_kind(path: Path) -> str:
+    kind = _SUFFIXES.get(path.suffix.lower())
+    if kind is None:
+        raise InvalidSettingError(f"cannot tell the format of {path.name!r} from its suffix; "
+                                  "use .csv, .parquet or .pq")
+    return kind
+
+
+def _check_columns(path: Path, present: Sequence[str], time: str, wanted: Sequence[str] | None) -> list[str]:
+    listing = ", ".join(present) or "(none)"
+    if time not in present:
+        raise DataError(f"{path.name} has no time column {time!r}; columns present: {listing}; "
+                        "pass time=<name of the time column>")
+    if wanted is None:
+        return [c for c in present if c != time]
+    missing = [c for c in wanted if c not in present]
+    if missing:
+        raise DataError(f"{path.name} lacks column(s) {', '.join(missing)}; columns present: {listing}; "
+                        "check the names")
+    return list(wanted)
+
+
+def _numeric(path: Path, name: str, column: pd.Series) -> np.ndarray:
+    import pandas as pd
+
+    if column.dtype.kind in "fiub":
+        return column.to_numpy(dtype=float, na_value=np.nan)
+    converted = pd.to_numeric(column, errors="coerce")
+    bad = converted.isna() & column.notna()
+    if bad.any():
+        row = int(np.argmax(bad.to_numpy()))
+        raise DataError(f"column {name!r} of {path.name} holds {column.iloc[row]!r} at data row {row}; "
+                        "expected numbers; fix or drop that column")
+    return converted.to_numpy(dtype=float, na_value=np.nan)
+
+
+def _read_csv(path: Path, time: str, wanted: Sequence[str] | None
+              ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    import pandas as pd
+
+    header: dict[str, Any] = {}
+    skip = 0
+    with open(path, encoding="utf-8-sig") as handle:
+        for line in handle:
+            if not line.startswith("#"):
+                break
+            if skip == 0 and line.startswith(_CSV_PREFIX):
+                version, _, body = line[len(_CSV_PREFIX):].partition(" ")
+                header = _parse_header(path, version, body)
+            skip += 1
+    try:
+        present = list(pd.read_csv(path, skiprows=skip, nrows=0, encoding="utf-8-sig").columns)
+        names = _check_columns(path, present, time, wanted)
+        frame = pd.read_csv(path, skiprows=skip, usecols=[time, *names], encoding="utf-8-sig",
+                            **_csv_read_options())
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        if isinstance(exc, DataError):
+            raise
+        reason = " ".join(str(exc).split())
+        raise DataError(f"cannot read {path.name} as CSV ({reason}); expected a header row then numbers"
+                        ) from None
+    data = {name: _numeric(path, name, frame[name]) for name in names}
+    return _numeric(path, time, frame[time]), data, header
+
+
+def _parse_header(path: Path, version: Any, body: str | bytes) -> dict[str, Any]:
+    """The JSON of units, roles and meta, for a file of format version `version`."""
+    try:
+        header = json.loads(body) if str(version).strip() == str(_VERSION) else None
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        header = None
+    if not isinstance(header, dict):
+        raise DataError(f"{path.name} has an unreadable {_FORMAT} header (version {str(version).strip()!r}); "
+                        f"expected version {_VERSION} with JSON; rewrite the file with this cosim")
+    return header
+
+
+def _read_parquet(path: Path, time: str, wanted: Sequence[str] | None
+                  ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        schema = pq.read_schema(path)
+        names = _check_columns(path, schema.names, time, wanted)
+        table = pq.read_table(path, columns=[time, *names])
+    except (pa.ArrowException, OSError) as exc:
+        reason = " ".join(str(exc).split())
+        raise DataError(f"cannot read {path.name} as Parquet ({reason}); expected a Parquet table") from None
+    raw = (schema.metadata or {}).get(_PARQUET_KEY)
+    header: dict[str, Any] = {}
+    if raw is not None:
+        try:
+            version = json.loads(raw).get("version", "?")
+        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
+            version = "?"
+        header = _parse_header(path, version, raw)
+
+    def column(name: str) -> np.ndarray:
+        chunked = table.column(name)
+        if not (pa.types.is_floating(chunked.type) or pa.types.is_integer(chunked.type)
+                or pa.types.is_boolean(chunked.type) or pa.types.is_decimal(chunked.type)):
+            raise DataError(f"column {name!r} of {path.name} has type {chunked.type}; expected numbers "
+                            "(time in s as a number); convert or drop that column")
+        return np.asarray(chunked.to_numpy(zero_copy_only=False), dtype=float)
+
+    return column(time), {name: column(name) for name in names}, header
