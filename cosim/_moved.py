@@ -104,7 +104,7 @@ class _MovedFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
         return _MovedModule(spec.name, self.moved[spec.name])
 
     def exec_module(self, module: types.ModuleType) -> None:
-        new = " or ".join(self.moved[module.__name__])
+        new = " or ".join(t for t in self.moved[module.__name__] if "._" not in t)  # public places only
         _warn_caller(f"{module.__name__} has moved: import from {new} (the old path goes in a later release)")
 
 

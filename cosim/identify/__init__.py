@@ -6,6 +6,12 @@
 * :mod:`~cosim.identify.model` - :class:`IdentifiedModel`: equations, simulation, JSON files;
 * :mod:`~cosim.identify.metrics` - fit figures: R², NRMSE fit, maximum deviation, k-step-ahead error.
 
+The steps of a :class:`SINDYc` fit live in private modules, each named for its job: ``_settings`` (checks of
+the settings), ``_records`` (records read into arrays), ``_library`` (library terms, kinematic rows),
+``_differentiation`` (pysindy differentiators), ``_equation_error`` (features and targets),
+``_sparse_regression`` (scale-aware STLSQ, threshold by BIC), ``_refinement`` (output-error refinement and
+backward elimination), ``_stability`` (stability judgement).
+
 Imports the data and plant rooms and the foundation.
 """
 
@@ -15,11 +21,11 @@ from .metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_p
 from .model import DIVERGENCE_LIMIT, MODEL_FORMAT, MODEL_VERSION, IdentifiedModel, SimulationResult
 from .output_error import OutputErrorFit, refine_output_error, simulate_linear_batch
 from .sindyc import DIFFERENTIATION_METHODS, MIN_SAMPLES_PER_TERM, IdentificationWarning, SINDYc
-from .terms import FUNCTIONS, Term, compile_rhs, polynomial_terms
+from .terms import FUNCTIONS, Term, compile_rhs, compile_rk4, polynomial_terms
 
 __all__ = [
     "DIFFERENTIATION_METHODS", "DIVERGENCE_LIMIT", "FUNCTIONS", "IdentificationWarning", "IdentifiedModel",
     "METRICS", "MIN_SAMPLES_PER_TERM", "MODEL_FORMAT", "MODEL_VERSION", "OutputErrorFit", "SINDYc",
-    "SimulationResult", "Term", "compile_rhs", "k_step_ahead_error", "max_deviation_pct", "nrmse_fit_pct",
-    "polynomial_terms", "r2", "refine_output_error", "simulate_linear_batch",
+    "SimulationResult", "Term", "compile_rhs", "compile_rk4", "k_step_ahead_error", "max_deviation_pct",
+    "nrmse_fit_pct", "polynomial_terms", "r2", "refine_output_error", "simulate_linear_batch",
 ]

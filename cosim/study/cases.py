@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidSettingError
-from ..identify.sindyc import SINDYc, _check_number
+from ..identify._settings import _check_number
+from ..identify.sindyc import SINDYc
 from .paper import STUDY_DT, STUDY_TABLE1, STUDY_X0
 
 __all__ = ["STUDY_SETTINGS", "study_case"]

@@ -1,0 +1,52 @@
+"""Whether an identified model is stable on the time scale of the records it was identified from.
+
+:func:`_stability` gives the ``stable``, ``stability`` (a sentence) and, for a linear model,
+``eigenvalues`` entries of ``model_.meta`` of a :class:`~cosim.identify.sindyc.SINDYc` fit. A linear model
+counts as unstable when an eigenvalue's real part exceeds ``1/T`` (T the record length): a mode growing at
+most e-fold over the record is marginal, since the data cannot tell it from an integrator. A nonlinear model
+is judged by a free run on the longest record.
+
+Examples
+--------
+>>> import numpy as np
+>>> from cosim.identify.model import IdentifiedModel
+>>> slow = IdentifiedModel(states=("x",), inputs=(), terms=("x",), coef=np.array([[0.05]]))
+>>> record = (np.zeros((101, 1)), np.zeros((101, 0)))   # 10 s at dt = 0.1
+>>> meta = _stability(slow, [record], 0.1)   # grows e-fold in 20 s: marginal on a 10 s record
+>>> meta["stable"], meta["stability"].split(" (")[0]
+(True, 'marginal: largest real part of the eigenvalues 0.05 1/s')
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .model import IdentifiedModel
+
+
+def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]],
+               dt: float) -> dict[str, Any]:
+    """The stability entries of the model's meta, judged over the longest of the records `runs`."""
+    span = max(len(x) - 1 for x, _ in runs) * dt
+    out: dict[str, Any] = {}
+    if model.is_linear:
+        a = model.linear_matrices()[0]
+        eig = np.linalg.eigvals(a)
+        worst = float(np.max(eig.real))
+        # a mode that grows at most e-fold over the record cannot be told from an integrator by this data
+        limit = 1.0 / span
+        out["eigenvalues"] = [[float(v.real), float(v.imag)] for v in eig]
+        out["stable"] = bool(worst <= limit)
+        kind = "stable" if worst < 0 else "marginal" if worst <= limit else "unstable"
+        out["stability"] = (f"{kind}: largest real part of the eigenvalues {worst:.6g} 1/s (marginal up to "
+                            f"{limit:.3g} 1/s: at most e-fold growth over the {span:.6g} s record)")
+        return out
+    x, u = max(runs, key=lambda r: len(r[0]))
+    sim = model.simulate(x[0], u[:-1], dt=dt)
+    out["stable"] = bool(sim.ok)
+    out["stability"] = ("the free run on the longest record " + ("stays in range" if sim.ok else
+                        f"diverges: {sim.message}"))
+    return out
