@@ -17,9 +17,10 @@ What every room uses sits beside them: :mod:`cosim.errors`, :mod:`cosim.files` (
 :mod:`cosim.numbers`, :mod:`cosim.report` (HTML) and :mod:`cosim.figures` (PNG).
 
 ``import cosim`` loads the plant and data rooms only; the names of the heavier rooms below are imported on
-first use, so that the command line and sweep workers start quickly. Module paths of the flat layout before
-the rooms (``cosim.diagnosis``, ``cosim.trajectory``...) still import, with a
-:class:`~cosim.errors.CosimDeprecationWarning` naming the new place.
+first use, so that the command line and sweep workers start quickly. Inside those two rooms, too, pandas,
+scipy, pyarrow, fmpy and tqdm are imported by the functions that use them (``tests/test_light_imports.py``
+checks the heaviest). Module paths of the flat layout before the rooms (``cosim.diagnosis``,
+``cosim.trajectory``...) still import, with a :class:`~cosim.errors.CosimDeprecationWarning` naming the new place.
 """
 
 import logging
@@ -52,7 +53,7 @@ _LAZY = {
     "IdentifiedModel": "identify.model",
     "SimulationResult": "identify.model",
     "to_statespace": "export.core",
-    "export": "export.core",
+    "export": "export",
     "run_sweep": "study.sweep",
     "SweepResult": "study.sweep",
     "reproduce_paper": "study.reproduce",

@@ -51,7 +51,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "cosim.residuals": ("cosim.diagnose.residuals",),
     "cosim.effects": ("cosim.diagnose.effects",),
     "cosim.screening": ("cosim.diagnose.screening",),
-    "cosim.diagnosis": ("cosim.diagnose.diagnosis",),
+    "cosim.diagnosis": ("cosim.diagnose.diagnosis", "cosim.diagnose.candidates", "cosim.diagnose.diagnosis_report"),
     "cosim.closed_loop": ("cosim.loop.closed_loop",),
     "cosim.response": ("cosim.loop.response",),
     "cosim.validation": ("cosim.loop.validation",),

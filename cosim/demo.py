@@ -48,8 +48,8 @@ from threadpoolctl import threadpool_limits
 from .data.plots import plot_trajectory
 from .data.simulation import simulate
 from .data.trajectory import Trajectory
-from .diagnose.diagnosis import DiagnosisReport, diagnose
-from .export.core import export_mat, to_statespace
+from .diagnose import DiagnosisReport, diagnose
+from .export import export_mat, to_statespace
 from .identify.metrics import nrmse_fit_pct, r2
 from .identify.model import IdentifiedModel
 from .identify.sindyc import SINDYc

@@ -17,7 +17,7 @@ from fmpy.validation import validate_fmu
 import cosim.identify.terms
 from cosim import simulate
 from cosim.errors import BuildError, FmiCallError, InvalidSettingError, UnknownVariableError
-from cosim.export.core import (
+from cosim.export import (
     CONSTANT_INPUT,
     OperatingPoint,
     export,

@@ -5,15 +5,20 @@
 * :mod:`~cosim.diagnose.effects` - the catalogue of effects (friction, backlash, cogging...) and where each
   attaches to a model's equations;
 * :mod:`~cosim.diagnose.screening` - the output-error score test and fit of candidate effects;
-* :mod:`~cosim.diagnose.diagnosis` - :func:`diagnose`: screen, fit, judge, add, repeat; the
-  :class:`DiagnosisReport`.
+* :mod:`~cosim.diagnose.candidates` - :class:`EffectCandidate`, one effect at one place with its evidence and
+  physical parameters;
+* :mod:`~cosim.diagnose.diagnosis` - :func:`diagnose`: screen, fit, judge, add, repeat (one screening round in
+  ``_ranking``, the trial fits in ``_trials``);
+* :mod:`~cosim.diagnose.diagnosis_report` - the :class:`DiagnosisReport`.
 
 Imports the export and identify rooms and below.
 """
 
 from __future__ import annotations
 
-from .diagnosis import DiagnosisReport, EffectCandidate, diagnose
+from .candidates import EffectCandidate
+from .diagnosis import diagnose
+from .diagnosis_report import DiagnosisReport
 from .effects import EFFECTS, Attachment, Effect, Roles, register_effect
 from .residuals import RESIDUAL_KINDS, ResidualAnalysis, ResidualTests, correlation_tests, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit

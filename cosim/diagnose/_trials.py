@@ -1,0 +1,260 @@
+"""The trial fits of :func:`~cosim.diagnose.diagnosis.diagnose`: a candidate effect fitted for real, then judged.
+
+The score test ranks the candidates to first order only. The leading ones are fitted here by output error
+(:func:`~cosim.diagnose.screening.output_error_fit`, with the effect's nuisance parameter) and judged on the
+actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio p-value, size):
+
+* ``_fit_with`` - the model refitted with one candidate added: rows where the effect is not clearly non-zero
+  are pruned (``_prune_rows``), a nuisance the data pin only through a product is moved to its physical value
+  (``_physical_nuisance``);
+* ``_drop_redundant`` - the backward check: an effect found earlier goes when a later one makes it redundant;
+* ``_final_parameters`` - an accepted effect's physical parameters and standard errors from the final model;
+* ``_FitOptions`` - how every fit of one diagnosis treats the initial state and the noise levels.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from ..errors import DataError
+from ..identify.model import IdentifiedModel
+from .candidates import EffectCandidate, _uncertainty
+from .effects import EFFECTS, Attachment, Effect, Roles
+from .screening import (
+    Nuisance,
+    OutputErrorScreen,
+    correlation_factor,
+    free_run_cost,
+    free_run_residual,
+    output_error_fit,
+)
+
+
+@dataclass(frozen=True)
+class _FitOptions:
+    """How every output-error fit of one diagnosis treats the initial state and the noise levels."""
+
+    estimate_x0: bool
+    noise: Mapping[str, float] | None
+
+    @property
+    def kw(self) -> dict[str, Any]:
+        return {"estimate_x0": self.estimate_x0, "noise": self.noise}
+
+
+def _with_effect(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list[str]) -> IdentifiedModel:
+    """The model with the candidate's terms in its rows, at the coefficients the screening estimated."""
+    terms = list(model.terms) + [t for t in cand.terms if t not in model.terms]
+    coef = np.zeros((len(model.states), len(terms)))
+    coef[:, :len(model.terms)] = model.coef
+    q = len(cand.terms)
+    for r_i, row in enumerate(cand.rows):
+        i = model.states.index(row)
+        for t_i, term in enumerate(cand.terms):
+            value = cand.coefficients[r_i * q + t_i] if cand.coefficients else 0.0
+            coef[i, terms.index(term)] = value if value != 0.0 else 1e-12
+    meta = {"x0": model.meta["x0"]} if isinstance(model.meta, Mapping) and "x0" in model.meta else {}
+    return IdentifiedModel(states=model.states, inputs=tuple(model.inputs) + tuple(new_inputs), terms=tuple(terms),
+                           coef=coef, dt=model.dt, meta=meta)
+
+
+@dataclass
+class _Trial:
+    candidate: EffectCandidate
+    model: IdentifiedModel
+    nuisances: list[Nuisance]
+    nuisance: Nuisance | None
+    new_columns: dict[str, np.ndarray]
+
+
+def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
+              nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
+              min_size: float, fit: _FitOptions, iterations: int = 15) -> _Trial | None:
+    """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
+    effect = EFFECTS[cand.name]
+    signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
+    placed = Attachment(cand.attached_to, signals, cand.rows)
+    new_cols = effect.columns(placed, cand.nuisance, columns)
+    cols = {**columns, **new_cols}
+    fit_terms = effect.fit_terms(placed, cand.nuisance)
+    if fit_terms != cand.terms:  # more terms than the screening's: they start at zero
+        start = dict(zip(cand.terms, np.reshape(cand.coefficients, (len(cand.rows), -1)).T, strict=True)) \
+            if cand.coefficients else {}
+        coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
+        cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
+    trial = _with_effect(current, cand, list(new_cols))
+    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma) > float(screen.residual @ screen.residual):
+        # the score's one linear step overshoots (a drifting free run): start the effect from zero instead
+        trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
+    nuis = list(nuisances)
+    own = None
+    if effect.nuisance is not None and not effect.integer and effect.fit_nuisance:
+        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
+        nuis.append(own)
+    try:
+        model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
+        if own is not None:
+            cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
+        if effect.physical is not None:
+            model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations, fit)
+        pruned = _prune_rows(model, se, cand)
+        if pruned is not None:
+            model, cand = pruned
+            model, se, nuis = output_error_fit(model, cols, dt, nuisances=nuis, **fit.kw)
+            if own is not None:
+                cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return None
+    cost0 = float(screen.residual @ screen.residual)
+    cost1 = float(model.meta["refinement"]["cost"])
+    q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+    if cost1 >= cost0:
+        return None
+    delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q)
+    plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
+    cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
+                   explained={"size": size, "plausible": plausible, "correlation_factor": factor},
+                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible))
+    return _Trial(cand, model, nuis, own, new_cols)
+
+
+def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,
+              cost0: float, cost1: float, q: int) -> tuple[float, float, float, float]:
+    """What `q` more parameters bought, from cost `cost0` (the model of `screen`) to `cost1` (`fuller`): the BIC
+    change, the likelihood-ratio p-value, the size (share of the data's spread) and the residual's correlation
+    factor. A residual the fuller model leaves coloured holds fewer independent samples than it has
+    (:func:`~cosim.diagnose.screening.correlation_factor`): both tests count samples by it."""
+    after = free_run_residual(fuller, cols, dt, fuller.meta["x0"][0], screen.sigma)
+    factor = correlation_factor(after) if after is not None else 1.0
+    n_eff = screen.n_obs / factor
+    delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
+    variance = factor * cost1 / max(screen.n_obs - screen.base.shape[1] - q, 1)
+    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
+    size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
+    return delta_bic, p_value, size, factor
+
+
+def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Effect, placed: Attachment,
+                       cols: dict[str, np.ndarray], dt: float, nuis: list[Nuisance], iterations: int,
+                       fit: _FitOptions):
+    """Move a nuisance the data pin only through a product (a backlash's width) to its physical value.
+
+    The term is rewritten at the value :attr:`Effect.physical` gives, its coefficients scaled to keep the
+    product, and the model refitted; twice, since the part of the record inside the band changes with it.
+    """
+    se = np.zeros_like(model.coef)
+    for _ in range(2):
+        coef = {row: model.coef[model.states.index(row), [model.terms.index(t) for t in cand.terms]]
+                for row in cand.rows if all(t in model.terms for t in cand.terms)}
+        value = effect.physical(coef, float(cand.nuisance), Roles.of(model), placed) if coef else None
+        if value is None or abs(math.log(value / cand.nuisance)) < 0.01:
+            break
+        terms, matrix = list(model.terms), model.coef.copy()
+        new_terms = effect.terms(placed, value)
+        for old, new in zip(cand.terms, new_terms, strict=True):
+            k = terms.index(old)
+            terms[k] = new
+            matrix[:, k] *= cand.nuisance / value
+        moved = IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=matrix,
+                                dt=model.dt, meta=model.meta)
+        model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
+        cand = replace(cand, nuisance=value, terms=new_terms)
+    return model, se, nuis, cand
+
+
+def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
+                    nuisances: list[Nuisance], columns: dict[str, np.ndarray], dt: float, alpha: float,
+                    bic_margin: float, min_size: float, fit: _FitOptions):
+    """Backward check: each earlier effect is removed and the model refitted; if the removal does not cost a
+    significant rise of the output error (the same test as for adding it), the effect goes."""
+    for j in range(len(accepted) - 2, -1, -1):
+        cand = accepted[j]
+        keep = [k for k in range(len(current.terms)) if current.terms[k] not in cand.terms]
+        own = owners.index(j) if j in owners else None
+        rest = [nu for k, nu in enumerate(nuisances) if k != own]
+        reduced = IdentifiedModel(states=current.states, inputs=current.inputs,
+                                  terms=tuple(current.terms[k] for k in keep), coef=current.coef[:, keep],
+                                  dt=current.dt, meta=current.meta)
+        try:
+            reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40, **fit.kw)
+        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+            continue
+        cost_full = float(current.meta["refinement"]["cost"])
+        cost_reduced = float(reduced.meta["refinement"]["cost"])
+        if cost_reduced <= cost_full:
+            pays = False
+        else:
+            q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+            delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
+                                                    columns, dt, cost_reduced, cost_full, q)
+            pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
+        if not pays:
+            current, nuisances = reduced, rest
+            accepted = accepted[:j] + accepted[j + 1:]
+            owners = [k - (k > j) for k in owners if k != j]
+    return current, accepted, owners, nuisances
+
+
+#: A row keeps an effect's terms only if one of them stands this many standard errors from zero.
+ROW_T_MIN = 10.0
+
+
+def _prune_rows(model: IdentifiedModel, se: np.ndarray, cand: EffectCandidate):
+    """Drop the rows where the effect's coefficients are not clearly non-zero after the fit (None: keep all)."""
+    if len(cand.rows) < 2:
+        return None
+    keep = []
+    for row in cand.rows:
+        i = model.states.index(row)
+        t = [abs(model.coef[i, model.terms.index(term)]) / max(se[i, model.terms.index(term)], 1e-300)
+             for term in cand.terms if term in model.terms]
+        if t and max(t) >= ROW_T_MIN:
+            keep.append(row)
+    if len(keep) == len(cand.rows) or not keep:
+        return None
+    coef = model.coef.copy()
+    for row in cand.rows:
+        if row not in keep:
+            for term in cand.terms:
+                if term in model.terms:
+                    coef[model.states.index(row), model.terms.index(term)] = 0.0
+    pruned = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
+                             meta=model.meta)
+    return pruned, replace(cand, rows=tuple(keep))
+
+
+def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCandidate:
+    """The candidate with parameters (and standard errors) from the final model's coefficients."""
+    effect = EFFECTS[cand.name]
+    roles = Roles.of(model)
+    refinement = model.meta.get("refinement", {}) if isinstance(model.meta, Mapping) else {}
+    order = {(int(i), str(t)): k for k, (i, t) in enumerate(refinement.get("parameters", []))}
+    full = np.asarray(refinement["covariance"]) if "covariance" in refinement else None
+    coef, index = {}, []
+    for row in cand.rows:
+        i = model.states.index(row)
+        terms = [t for t in cand.terms if t in model.terms]
+        if not terms:
+            continue
+        coef[row] = model.coef[i, [model.terms.index(t) for t in terms]]
+        index += [order.get((i, t), -1) for t in terms]
+    if not coef:
+        return cand
+    attachment = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")), cand.rows)
+    params = effect.parameters(coef, cand.nuisance, roles, attachment)
+    if "delay_samples" in params and model.dt:
+        params["delay_s"] = params["delay_samples"] * float(model.dt)
+    unc = dict(cand.uncertainty)
+    if full is not None and index and min(index) >= 0:
+        unc = _uncertainty(effect, coef, full[np.ix_(index, index)], cand.nuisance, roles, attachment)
+    if "delay_samples" in unc and model.dt:
+        unc["delay_s"] = unc["delay_samples"] * float(model.dt)
+    if cand.nuisance_se and effect.nuisance in params:
+        unc[effect.nuisance] = float(cand.nuisance_se)
+    return replace(cand, parameters=params, uncertainty=unc)

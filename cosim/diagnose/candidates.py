@@ -1,0 +1,104 @@
+"""Candidate effects: one effect at one place, with its evidence and its physical parameters.
+
+* :class:`EffectCandidate` - one catalogued effect at one place with one nuisance value, as the screening
+  scores it and the trial fits judge it: change of BIC, p-value, size, physical parameters with their
+  standard errors;
+* ``_uncertainty`` - those standard errors, by the delta method from the covariance of the effect's
+  coefficients.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .effects import Attachment, Effect, Roles
+
+__all__ = ["EffectCandidate"]
+
+
+@dataclass(frozen=True)
+class EffectCandidate:
+    """One effect at one place with one nuisance value, scored on the integral equation error.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue name.
+    attached_to : str
+        The signal (or pair ``"a-b"``, or ``"constant"``) it acts on.
+    rows : tuple of str
+        The states' equations it enters.
+    nuisance : float or None
+        The nuisance parameter (smoothing velocity, width, periods, delay in samples).
+    terms : tuple of str
+        The term expressions it adds.
+    delta_bic : float
+        Change of BIC when added (negative: better).
+    p_value : float
+        Likelihood-ratio test against the model without it.
+    explained : dict of str to float
+        Per row, the fraction of the row's residual sum of squares it removes.
+    significant : bool
+    parameters : dict of str to float
+        Physical parameters from the coefficients (see :mod:`cosim.diagnose.effects`).
+    uncertainty : dict of str to float
+        Standard errors of the parameters where known.
+    meaning : str
+        The effect's physical meaning.
+    """
+
+    name: str
+    attached_to: str
+    rows: tuple[str, ...]
+    nuisance: float | None
+    terms: tuple[str, ...]
+    delta_bic: float
+    p_value: float
+    explained: dict[str, float]
+    significant: bool
+    parameters: dict[str, float] = field(default_factory=dict)
+    uncertainty: dict[str, float] = field(default_factory=dict)
+    meaning: str = ""
+    coefficients: tuple[float, ...] = ()
+    nuisance_se: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "attached_to": self.attached_to, "rows": list(self.rows),
+                "nuisance": self.nuisance, "terms": list(self.terms), "delta_bic": self.delta_bic,
+                "p_value": self.p_value, "explained": dict(self.explained), "significant": self.significant,
+                "parameters": dict(self.parameters), "uncertainty": dict(self.uncertainty), "meaning": self.meaning}
+
+
+def _uncertainty(effect: Effect, coef: dict, cov: np.ndarray, value: float | None, roles: Roles,
+                 attachment: Attachment) -> dict[str, float]:
+    """Standard error of each physical parameter, by name, by the delta method: the gradient of the parameter
+    in the effect's coefficients (by differences) and their covariance ``cov`` (rows in ``coef``'s order, terms
+    within). The covariance matters: a delay's two taps are each loose but their centroid is not."""
+    flat = np.concatenate([np.asarray(c, dtype=float) for c in coef.values()])
+    if cov is None or np.shape(cov) != (flat.size, flat.size):
+        return {}
+    base = effect.parameters(coef, value, roles, attachment)
+    grads = {name: np.zeros(flat.size) for name in base}
+    steps = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * 1e-3
+    for k, h in enumerate(steps):
+        if not h > 0.0:
+            continue
+        moved_flat = flat.copy()
+        moved_flat[k] += h
+        moved, at = {}, 0
+        for row, c in coef.items():
+            moved[row] = moved_flat[at:at + len(c)]
+            at += len(c)
+        for name, v in effect.parameters(moved, value, roles, attachment).items():
+            if name in grads and np.isfinite(v) and np.isfinite(base[name]):
+                grads[name][k] = (v - base[name]) / h
+    out = {}
+    for name, g in grads.items():
+        var = float(g @ cov @ g)
+        if var > 0.0:
+            out[name] = math.sqrt(var)
+    return out

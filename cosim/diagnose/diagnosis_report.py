@@ -1,0 +1,201 @@
+"""The diagnosis report: what :func:`~cosim.diagnose.diagnosis.diagnose` found, as tables, figures, HTML and JSON.
+
+* :class:`DiagnosisReport` - the accepted effects, every round's candidates and trial fits, the model before
+  and after with their free-run errors and residuals; as JSON (:meth:`~DiagnosisReport.to_dict`), one HTML
+  file (:meth:`~DiagnosisReport.write_report`, or sections of another report) and the evidence plot;
+* ``_figures`` - a model's free-run error against data (R², NRMSE, maximum deviation, whiteness): the
+  report's ``before`` and ``after``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..data.trajectory import Trajectory
+from ..identify.metrics import max_deviation_pct, nrmse_fit_pct, r2
+from ..identify.model import IdentifiedModel
+from ..report import Report
+from .candidates import EffectCandidate
+from .residuals import ResidualAnalysis
+
+__all__ = ["DiagnosisReport"]
+
+
+@dataclass(frozen=True)
+class DiagnosisReport:
+    """What :func:`diagnose` found.
+
+    Attributes
+    ----------
+    effects : tuple of EffectCandidate
+        The accepted effects, in the order found (empty: no effect found), with parameters from the final
+        refit.
+    ranking : tuple of EffectCandidate
+        The first round's best candidate of every effect, best first.
+    rounds : tuple of tuple of EffectCandidate
+        Each round's ranking (by the score test).
+    trials : tuple of tuple of EffectCandidate
+        Each round's leading candidates fitted for real, judged on the actual drop of the output error (the
+        best significant one is accepted).
+    steps : tuple of (tuple of str, IdentifiedModel)
+        After each round, the effects the model holds and the model refitted with them (the last is
+        `model_after`). An effect found earlier is dropped when the one found later makes it redundant.
+    model_before, model_after : IdentifiedModel
+    before, after : dict
+        ``r2``, ``nrmse_pct``, ``max_dev_pct`` (means over the states, and per state under ``per_state``), and
+        ``white`` (the free-run residual passes the whiteness test for every state).
+    residuals_before, residuals_after : ResidualAnalysis
+    message : str
+        One sentence: what was found, or "no effect found" and whether the residual is white.
+    """
+
+    effects: tuple[EffectCandidate, ...]
+    ranking: tuple[EffectCandidate, ...]
+    rounds: tuple[tuple[EffectCandidate, ...], ...]
+    trials: tuple[tuple[EffectCandidate, ...], ...]
+    steps: tuple[tuple[tuple[str, ...], IdentifiedModel], ...]
+    model_before: IdentifiedModel
+    model_after: IdentifiedModel
+    before: dict[str, Any]
+    after: dict[str, Any]
+    residuals_before: ResidualAnalysis
+    residuals_after: ResidualAnalysis
+    message: str
+    data: Trajectory | None = None
+
+    @property
+    def found(self) -> bool:
+        return bool(self.effects)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: ``effects`` (ranked, empty when none), ``before``/``after`` with ``nrmse_pct`` and ``r2``."""
+        return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
+                "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
+                "trials": [[{"name": c.name, "attached_to": c.attached_to, "delta_bic": c.delta_bic,
+                             "significant": c.significant, "parameters": dict(c.parameters)} for c in round_]
+                           for round_ in self.trials],
+                "equations_after": self.model_after.equations()}
+
+    def plot_evidence(self, path: str | os.PathLike) -> Path:
+        """PNG: for each accepted effect (or the top candidate), the equation residual of its row against the
+        signal it attaches to, before and after: friction shows as a step at zero speed that disappears."""
+        from ..figures import pyplot, save_figure
+
+        plt = pyplot()
+
+        shown = list(self.effects) or list(self.ranking[:1])
+        fig, axes = plt.subplots(1, max(len(shown), 1), figsize=(5.5 * max(len(shown), 1), 4.2), squeeze=False)
+        for ax, cand in zip(axes[0], shown, strict=False):
+            row = cand.rows[0] if cand.rows else self.model_before.states[-1]
+            i = self.model_before.states.index(row)
+            signal_name = cand.attached_to.split("-")[0] if cand.attached_to != "constant" else None
+            x_data = self.data[signal_name][:-1] if self.data is not None and signal_name in self.data.names else \
+                self.residuals_before.time[1:]
+            step = max(1, len(x_data) // 6000)
+            ax.plot(x_data[::step], self.residuals_before.equation[::step, i], ".", ms=1.5, alpha=0.5,
+                    label="before (model without it)")
+            ax.plot(x_data[::step], self.residuals_after.equation[::step, i], ".", ms=1.5, alpha=0.5,
+                    label="after (model with it)")
+            ax.set_xlabel(signal_name or "time [s]")
+            ax.set_ylabel(f"equation residual of {row}'")
+            ax.set_title(f"{cand.name} on {cand.attached_to}", fontsize=9)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8, markerscale=5)
+        fig.tight_layout()
+        return save_figure(fig, path)
+
+    def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis") -> Path:
+        """One HTML file: the verdict, the ranking, the parameters, before/after figures and the plots."""
+        path = Path(path)
+        report = Report(title, subtitle=self.message)
+        self.add_to_report(report, path.with_suffix(""))
+        return report.write(path)
+
+    def add_to_report(self, report: Report, stem: str | os.PathLike) -> list[Path]:
+        """Add the diagnosis sections to `report`: the effects with their parameters (± standard error), the
+        error before and after, the first round's candidates, the evidence, the residuals before and after,
+        the free run against the data, and the equations after.
+
+        Parameters
+        ----------
+        report : cosim.report.Report
+            The report to extend (one job's report can hold the diagnosis with its other stages).
+        stem : path-like
+            Path prefix of the PNG files written: ``<stem>_evidence.png``, ``<stem>_residuals_before.png``,
+            ``<stem>_residuals_after.png``, ``<stem>_free_run.png``.
+
+        Returns
+        -------
+        list of Path
+            The PNG files written.
+        """
+        from ..data.plots import plot_trajectory
+
+        stem = Path(stem)
+        pngs: list[Path] = []
+        report.add_table("Effects found", [{"rank": i + 1, "effect": e.name, "attached to": e.attached_to,
+                                            "rows": ", ".join(e.rows), "meaning": e.meaning,
+                                            **{k: float(f"{v:.5g}") for k, v in e.parameters.items()},
+                                            **{f"±{k}": float(f"{v:.3g}") for k, v in e.uncertainty.items()}}
+                                           for i, e in enumerate(self.effects)] or [{"result": "no effect found"}])
+        report.add_table("Error before and after", [
+            {"": "before", **{k: self.before[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}},
+            {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
+            caption="free-run simulation against the data; means over the states")
+        report.add_table("Candidates (first round)", [
+            {"effect": c.name, "attached to": c.attached_to, "nuisance": c.nuisance, "delta BIC": round(c.delta_bic, 1),
+             "p-value": float(f"{c.p_value:.3g}"), "significant": c.significant} for c in self.ranking])
+        pngs.append(Path(self.plot_evidence(f"{stem}_evidence.png")))
+        report.add_figure("Evidence", pngs[-1])
+        pngs.append(Path(self.residuals_before.plot(f"{stem}_residuals_before.png")))
+        report.add_figure("Residuals before", pngs[-1])
+        pngs.append(Path(self.residuals_after.plot(f"{stem}_residuals_after.png")))
+        report.add_figure("Residuals after", pngs[-1])
+        if self.data is not None:
+            sims = []
+            for label, model in (("before", self.model_before), ("after", self.model_after)):
+                sim = _free_run(model, self.data)
+                if sim is not None:
+                    sims.append((f"model {label}", sim))
+            pngs.append(Path(plot_trajectory(self.data.select(list(self.model_before.states)), f"{stem}_free_run.png",
+                                             label="data", others=sims)))
+            report.add_figure("Free run against the data", pngs[-1])
+        report.add_text("Equations after", "\n\n".join(self.model_after.equations()))
+        return pngs
+
+
+# ---------------------------------------------------------------------------------------------- free-run figures
+def _x0(model: IdentifiedModel, data: Trajectory) -> np.ndarray:
+    meta_x0 = model.meta.get("x0") if isinstance(model.meta, Mapping) else None
+    if meta_x0:
+        return np.asarray(meta_x0[0], dtype=float)
+    return np.array([data[name][0] for name in model.states])
+
+
+def _free_run(model: IdentifiedModel, data: Trajectory) -> Trajectory | None:
+    u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
+    sim = model.simulate(_x0(model, data), u[:-1], dt=data.dt, t0=float(data.time[0]))
+    return sim.to_trajectory() if sim.ok else None
+
+
+def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
+             x0: np.ndarray | None = None) -> dict[str, Any]:
+    truth = np.column_stack([data[name] for name in model.states])
+    u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
+    sim = model.simulate(_x0(model, data) if x0 is None else x0, u[:-1], dt=data.dt)
+    if not sim.ok:
+        return {"r2": None, "nrmse_pct": None, "max_dev_pct": None, "white": False, "status": sim.status,
+                "per_state": {}}
+    fit = np.atleast_1d(nrmse_fit_pct(truth, sim.states))
+    rr = np.atleast_1d(r2(truth, sim.states))
+    dev = np.atleast_1d(max_deviation_pct(truth, sim.states))
+    per_state = {name: {"r2": float(rr[i]), "nrmse_pct": float(100.0 - fit[i]), "fit_pct": float(fit[i]),
+                        "max_dev_pct": float(dev[i])} for i, name in enumerate(model.states)}
+    return {"r2": float(np.mean(rr)), "nrmse_pct": float(np.mean(100.0 - fit)), "max_dev_pct": float(np.mean(dev)),
+            "white": bool(res.white), "status": sim.status, "per_state": per_state}
