@@ -57,7 +57,7 @@ MOVED: dict[str, tuple[str, ...]] = {
     "cosim.validation": ("cosim.loop.validation",),
     "cosim.validation_report": ("cosim.loop.validation_report",),
     "cosim.reproduce": ("cosim.study.reproduce",),
-    "cosim.sweep": ("cosim.study.sweep",),
+    "cosim.sweep": ("cosim.study.sweep", "cosim.study.sweep_result"),
     "cosim.robustness": ("cosim.study.robustness",),
     "cosim.plots": ("cosim.figures", "cosim.data.plots", "cosim.loop.plots"),
     "controllers.pid_tuning": ("controllers.pid",),

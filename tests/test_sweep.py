@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from cosim import CosimError, DataError, InvalidSettingError
-from cosim.study.sweep import CaseFailedError, SweepError, SweepResult, _example_case, run_sweep
+from cosim.study.sweep import _example_case, run_sweep
+from cosim.study.sweep_result import CaseFailedError, SweepError, SweepResult
 
 # The toy case lives in cosim.study.sweep so that spawned processes and Dask workers import it by name from any
 # checkout, whatever pytest's import mode. Case 2 is designed to fail (negative noise level).

@@ -13,6 +13,10 @@ instantiating); only the three calls of the hot path are bound here.
 Time is ``t0 + k*dt`` (never accumulated) and the input passed to :meth:`FmuPlant.step` is held constant
 over the step (zero-order hold).
 
+The FMU file is checked and its model description read by :func:`~cosim.plant.model_description.open_model_description`;
+values are set and read by type in :mod:`cosim.plant._fmi_calls`, and FMI 2.0 messages arrive through
+:mod:`cosim.plant._fmi_callbacks`.
+
 Examples
 --------
 >>> from cosim import FmuPlant, build_fmu
@@ -26,136 +30,25 @@ from __future__ import annotations
 
 import collections
 import ctypes
-import difflib
-import itertools
 import logging
 import math
 import os
 import shutil
-import weakref
-import zipfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import fmpy
 import numpy as np
-from fmpy.model_description import ModelDescription, read_model_description
 
-from ..errors import (
-    FmiCallError,
-    FmuFormatError,
-    FmuNotFoundError,
-    FmuPlatformError,
-    InvalidSettingError,
-    UnknownVariableError,
-)
+from ..errors import FmiCallError, FmuPlatformError, InvalidSettingError, UnknownVariableError
+from ._fmi_callbacks import fmi2_callbacks
+from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
+from .model_description import _close_matches, open_model_description
 
+# open_model_description lives in .model_description; it is also imported from here, as before the split.
 __all__ = ["FmuPlant", "open_model_description"]
 
 _log = logging.getLogger("cosim.fmu")
-
-_STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
-_REAL_TYPES = ("Real", "Float64")
-_INT_TYPES = ("Integer", "Enumeration", "Int32", "Int64", "Int16", "Int8", "UInt8", "UInt16", "UInt32",
-              "UInt64")
-
-
-def _status_name(status: int) -> str:
-    return _STATUS[status] if 0 <= status < len(_STATUS) else f"illegal status {status}"
-
-
-def open_model_description(fmu: str | os.PathLike) -> ModelDescription:
-    """Check that `fmu` is a usable co-simulation FMU for this platform and return its model description.
-
-    Parameters
-    ----------
-    fmu : path-like
-        Path of the ``.fmu`` file.
-
-    Returns
-    -------
-    fmpy.model_description.ModelDescription
-
-    Raises
-    ------
-    FmuNotFoundError, FmuFormatError, FmuPlatformError
-        With a one-line message saying what is wrong and what to do.
-
-    Examples
-    --------
-    >>> from cosim import build_fmu
-    >>> open_model_description(build_fmu()).coSimulation.modelIdentifier
-    'two_mass_servo'
-    """
-    path = Path(fmu)
-    if not path.exists():
-        raise FmuNotFoundError(f"FMU not found: {path}; check the path (`cosim fmu build` prints the bundled one)")
-    if path.is_dir() or not zipfile.is_zipfile(path):
-        raise FmuFormatError(f"{path} is not an FMU: it is not a zip archive; pass the .fmu file a tool exported")
-    with zipfile.ZipFile(path) as archive:
-        names = set(archive.namelist())
-    if "modelDescription.xml" not in names:
-        raise FmuFormatError(f"{path} is not an FMU: the zip has no modelDescription.xml at its top level; "
-                             "re-export the model as an FMU")
-    try:
-        md = read_model_description(str(path), validate=False)
-    except Exception as exc:  # fmpy raises bare Exceptions and lxml errors
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise FmuFormatError(f"{path}: modelDescription.xml cannot be read ({first}); re-export the FMU") from None
-    if md.fmiVersion not in ("2.0",) and not str(md.fmiVersion).startswith("3."):
-        raise FmuFormatError(f"{path} is an FMI {md.fmiVersion} FMU; cosim drives FMI 2.0 and 3.0 FMUs: "
-                             "re-export it as FMI 2.0 or 3.0")
-    if md.coSimulation is None:
-        raise FmuFormatError(f"{path} has no co-simulation interface (Model Exchange only); re-export it with "
-                             "co-simulation enabled")
-    platform = fmpy.platform if md.fmiVersion == "2.0" else fmpy.platform_tuple
-    library = f"binaries/{platform}/{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
-    if library not in names:
-        found = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
-        has = ", ".join(found) if found else "none"
-        raise FmuPlatformError(f"{path} has no binary for this platform ({platform}; it has: {has}); "
-                               "export it for this platform")
-    return md
-
-
-# FMPy's C logger proxy keeps ONE process-wide pointer to the Python logger it forwards to. A logger per plant
-# would leave that pointer dangling once the plant is gone (and route every FMU's messages to the last plant).
-# So there is one logger for the process, never freed, which finds the plant by the componentEnvironment
-# pointer it was instantiated with, and falls back to FMPy's own printer for FMUs that are not ours.
-_PLANTS: weakref.WeakValueDictionary[int, FmuPlant] = weakref.WeakValueDictionary()
-_NEXT_ID = itertools.count(1)
-_LOGGER: list[Any] = []
-
-
-def _register(plant: FmuPlant) -> int:
-    key = next(_NEXT_ID)
-    _PLANTS[key] = plant
-    return key
-
-
-def _fmi2_logger() -> Any:
-    if not _LOGGER:
-        from fmpy.fmi1 import printLogMessage
-
-        def dispatch(env, instance, status, category, message):
-            plant = _PLANTS.get(env) if env else None
-            if plant is not None:
-                plant._on_log(status, category, message)
-            else:
-                printLogMessage(env, instance, status, category, message)
-
-        _LOGGER.append(fmpy.fmi2.fmi2CallbackLoggerTYPE(dispatch))
-    return _LOGGER[0]
-
-
-def _close_matches(name: str, candidates: Iterable[str]) -> str:
-    candidates = list(candidates)
-    near = difflib.get_close_matches(name, candidates, n=3)
-    hint = f" Did you mean {', '.join(near)}?" if near else ""
-    listed = ", ".join(candidates[:40]) + (" ..." if len(candidates) > 40 else "")
-    return f"{hint} Known: {listed or 'none'}"
-
 
 class FmuPlant:
     """A co-simulation FMU driven at a fixed communication step.
@@ -216,8 +109,8 @@ class FmuPlant:
         self.model_description = md
         self.fmi_version = "2.0" if md.fmiVersion == "2.0" else "3.0"
         self._vars = {v.name: v for v in md.modelVariables}
-        real_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type in _REAL_TYPES]
-        real_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type in _REAL_TYPES]
+        real_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type in REAL_TYPES]
+        real_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type in REAL_TYPES]
         self.inputs = tuple(self._choose(inputs, real_in, "input"))
         self.outputs = tuple(self._choose(outputs, real_out, "output"))
         self._param_names = tuple(v.name for v in md.modelVariables
@@ -286,27 +179,8 @@ class FmuPlant:
             if not only_parameters and var.start is None and var.causality != "input":
                 raise InvalidSettingError(f"{name!r} of {self.path.name} has no start value to set "
                                           f"(causality {var.causality}, initial {var.initial})")
-            self._settings[name] = self._coerce(var, value)
+            self._settings[name] = coerce(var, value)
 
-    def _coerce(self, var, value: Any) -> Any:
-        if var.type in _REAL_TYPES or var.type == "Float32":
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise InvalidSettingError(f"{var.name} takes a number, got {value!r}") from None
-            if not math.isfinite(value):
-                raise InvalidSettingError(f"{var.name} must be finite, got {value}")
-            return value
-        if var.type in _INT_TYPES:
-            if isinstance(value, bool) or float(value) != int(float(value)):
-                raise InvalidSettingError(f"{var.name} takes a whole number, got {value!r}")
-            return int(float(value))
-        if var.type == "Boolean":
-            if value not in (0, 1, True, False):
-                raise InvalidSettingError(f"{var.name} takes true/false or 0/1, got {value!r}")
-            return bool(value)
-        raise InvalidSettingError(f"{var.name} is of type {var.type}, which cosim does not set; "
-                                  "only real, integer and boolean variables can be set")
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -338,10 +212,12 @@ class FmuPlant:
         text = (message or b"").decode("utf-8", "replace").strip()
         self._messages.append(text)
         level = logging.DEBUG if status == 0 else logging.WARNING if status in (1, 2) else logging.ERROR
-        _log.log(level, "%s [%s] %s", self.path.name, _status_name(status),
+        _log.log(level, "%s [%s] %s", self.path.name, status_name(status),
                  text)
 
     def _load(self, instance_name: str) -> None:
+        import fmpy  # imported when an FMU is loaded, not with cosim (tens of ms)
+
         md = self.model_description
         self._unzipdir = fmpy.extract(str(self.path))
         common = dict(guid=md.guid, unzipDirectory=self._unzipdir,
@@ -357,16 +233,7 @@ class FmuPlant:
         fmu = self._fmu
         try:
             if self.fmi_version == "2.0":
-                callbacks = fmpy.fmi2.fmi2CallbackFunctions()
-                callbacks.logger = _fmi2_logger()
-                callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-                callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
-                callbacks.componentEnvironment = _register(self)
-                try:  # FMPy's C proxy formats printf-style arguments of the message
-                    from fmpy.logging import addLoggerProxy
-                    addLoggerProxy(ctypes.byref(callbacks))
-                except Exception:  # without it, messages arrive unformatted: still readable
-                    pass
+                callbacks = fmi2_callbacks(self)
                 self._callbacks = callbacks
                 fmu.instantiate(callbacks=callbacks)
             else:
@@ -388,7 +255,7 @@ class FmuPlant:
         when = f" at t={at:.9g} s" if at is not None else ""
         advice = (f": the FMU says: {self._messages[-1]}" if self._messages
                   else "; check the parameters, start values and inputs")
-        raise FmiCallError(f"{self.path.name}: {function} returned {_status_name(status)}{when}{advice}",
+        raise FmiCallError(f"{self.path.name}: {function} returned {status_name(status)}{when}{advice}",
                            function=function, status=status, time=at)
 
     def _bind_hot_path(self) -> None:
@@ -481,19 +348,8 @@ class FmuPlant:
             self._set_one(self._vars[name], value)
 
     def _set_one(self, var, value: Any) -> None:
-        fmu, vr = self._fmu, [var.valueReference]
         try:
-            if var.type in _REAL_TYPES:
-                (fmu.setReal if self.fmi_version == "2.0" else fmu.setFloat64)(vr, [value])
-            elif var.type == "Float32":
-                fmu.setFloat32(vr, [value])
-            elif var.type in _INT_TYPES:
-                if self.fmi_version == "2.0":
-                    fmu.setInteger(vr, [value])
-                else:
-                    getattr(fmu, "set" + ("Int64" if var.type == "Enumeration" else var.type))(vr, [value])
-            else:
-                fmu.setBoolean(vr, [value])
+            write_value(self._fmu, self.fmi_version, var, value)
         except Exception as exc:
             self._fmu_error("set " + var.name, exc)
 
@@ -511,20 +367,8 @@ class FmuPlant:
         fmu = self._fmu
         for name in names:
             var = self._variable(name)
-            vr = [var.valueReference]
             try:
-                if var.type in _REAL_TYPES:
-                    out.append((fmu.getReal if self.fmi_version == "2.0" else fmu.getFloat64)(vr)[0])
-                elif var.type == "Float32":
-                    out.append(fmu.getFloat32(vr)[0])
-                elif var.type in _INT_TYPES:
-                    getter = fmu.getInteger if self.fmi_version == "2.0" else getattr(
-                        fmu, "get" + ("Int64" if var.type == "Enumeration" else var.type))
-                    out.append(int(getter(vr)[0]))
-                elif var.type == "Boolean":
-                    out.append(bool(fmu.getBoolean(vr)[0]))
-                else:
-                    raise InvalidSettingError(f"{name} is of type {var.type}, which cosim does not read")
+                out.append(read_value(fmu, self.fmi_version, var))
             except InvalidSettingError:
                 raise
             except Exception as exc:

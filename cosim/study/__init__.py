@@ -1,6 +1,9 @@
 """The study room: many runs at once, and the reference study.
 
-* :mod:`~cosim.study.sweep` - :func:`run_sweep`: cases in local processes or on a Dask cluster;
+* :mod:`~cosim.study.sweep` - :func:`run_sweep`: cases in local processes or on a Dask cluster (the back-ends in
+  :mod:`~cosim.study._sweep_backends`);
+* :mod:`~cosim.study.sweep_result` - :class:`SweepResult`: each case's result or :class:`SweepError`, as tables
+  and versioned JSON files;
 * :mod:`~cosim.study.robustness` - :func:`robustness`: a validation repeated over perturbed plants;
 * :mod:`~cosim.study.paper` - the published study: its initial state, sampling, noise levels, Table 1, and
   the two-mass servo's linear model (:func:`two_mass_matrices`);
@@ -25,7 +28,8 @@ from .paper import (
 )
 from .reproduce import EXCITATIONS, PaperReproduction, reproduce_paper
 from .robustness import DEFAULT_UNCERTAIN, RobustnessResult, robustness
-from .sweep import SWEEP_FORMAT, SWEEP_VERSION, CaseFailedError, SweepError, SweepResult, run_sweep
+from .sweep import run_sweep
+from .sweep_result import SWEEP_FORMAT, SWEEP_VERSION, CaseFailedError, SweepError, SweepResult
 
 __all__ = [
     "CaseFailedError", "DEFAULT_UNCERTAIN", "EXCITATIONS", "INPUTS", "PaperReproduction", "RobustnessResult",

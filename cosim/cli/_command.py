@@ -1,0 +1,94 @@
+"""What every ``cosim`` command shares: one-line errors, text or JSON output, and readers of option values.
+
+* :func:`_friendly` - a command's library errors become one ``error: ...`` line on stderr and an exit status;
+* :func:`_emit` - the result as text, or as one JSON object with ``--json``;
+* :func:`_pairs`, :func:`_names`, :func:`_ranges` - ``NAME=VALUE``, ``A,B,...`` and ``NAME=LOW:HIGH`` options;
+* :func:`_resolve_fmu` - an FMU argument: a path, or ``bundled`` / ``bundled3`` for the bundled servo.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from ..errors import CosimError, InvalidSettingError
+from ..numbers import parse_number
+
+
+def _emit(as_json: bool, payload: dict[str, Any], text: str) -> None:
+    """Print `payload` as one JSON object with ``--json``, else `text`."""
+    if as_json:
+        click.echo(json.dumps(payload, default=float))
+    else:
+        click.echo(text)
+
+
+def _friendly(func: Callable) -> Callable:
+    """Turn library errors into one line on stderr and exit status 1 (2 for internal errors)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except CosimError as exc:
+            if os.environ.get("COSIM_DEBUG"):
+                raise
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            click.echo("error: interrupted", err=True)
+            sys.exit(130)
+        except Exception as exc:  # a bug of ours: still one line, with the way to see more
+            if os.environ.get("COSIM_DEBUG"):
+                raise
+            click.echo(f"error: internal error {type(exc).__name__}: {exc} (set COSIM_DEBUG=1 for the "
+                       "traceback and report it)", err=True)
+            sys.exit(2)
+
+    return wrapper
+
+
+def _pairs(items: tuple[str, ...], option: str) -> dict[str, str]:
+    """``("Fc=0.3", "Jm=300")`` -> {"Fc": "0.3", "Jm": "300"}; `option` names the option in the error."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise InvalidSettingError(f"{option} takes NAME=VALUE, got {item!r}")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _resolve_fmu(path: str) -> Path:
+    """`bundled` (or `bundled3` for FMI 3.0) names the bundled two-mass servo FMU."""
+    if path in ("bundled", "bundled3"):
+        from ..plant.build import build_fmu
+
+        return build_fmu(fmi_version="3.0" if path == "bundled3" else "2.0")
+    return Path(path)
+
+
+def _names(text: str, option: str) -> list[str]:
+    """``"theta_m, omega_m"`` -> ["theta_m", "omega_m"]; at least one name."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise InvalidSettingError(f"{option} takes comma-separated column names, got {text!r}")
+    return names
+
+
+def _ranges(items: tuple[str, ...], option: str) -> dict[str, tuple[float, float]]:
+    """``("Fc=0:200",)`` -> {"Fc": (0.0, 200.0)}."""
+    out = {}
+    for name, text in _pairs(items, option).items():
+        low, sep, high = text.partition(":")
+        if not sep:
+            raise InvalidSettingError(f"{option} takes NAME=LOW:HIGH, got {name}={text}")
+        out[name] = (parse_number(low, what=f"{option} {name} low"), parse_number(high, what=f"{option} {name} high"))
+    return out

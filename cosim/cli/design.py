@@ -1,0 +1,160 @@
+"""``cosim design pid`` and ``cosim design mpc``: a controller designed on an identified linear model."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from ..errors import InvalidSettingError
+from ..numbers import parse_number
+from ._command import _emit, _friendly, _names, _ranges
+
+__all__ = ["design"]
+
+
+@click.group()
+def design() -> None:
+    """Design a controller on an identified model (cosim model JSON) and save it as JSON.
+
+    \b
+    Example:
+      cosim design pid model.json --output theta_L --velocity omega_m --u-max 5000 -o pid.json
+      cosim design mpc model.json --measured theta_m,theta_L --tracked theta_L --u-max 5000 -o mpc.json
+    """
+
+
+def _design_model(model_path: str, dt_text: str | None):
+    """The identified model as a continuous named StateSpace, and the controller's sample time."""
+    from ..export.core import to_statespace
+    from ..identify.model import IdentifiedModel
+
+    model = IdentifiedModel.load(model_path)
+    if not model.is_linear:
+        raise InvalidSettingError(f"{model_path} is nonlinear, and controllers are designed on a linear model; "
+                                  "identify one with `cosim identify ... --library linear`")
+    dt = parse_number(dt_text, what="--dt") if dt_text else model.dt
+    if dt is None or not dt > 0:
+        raise InvalidSettingError("the model has no sample time; pass the controller's --dt (e.g. --dt 1/2257)")
+    return to_statespace(model), float(dt), model
+
+
+def _limit(text: str | None, option: str) -> float | None:
+    return None if text is None else parse_number(text, what=option)
+
+
+def _bounds(u_min: str | None, u_max: str | None) -> tuple[float | None, float | None]:
+    """--u-min and --u-max; a missing --u-min mirrors --u-max."""
+    hi = _limit(u_max, "--u-max")
+    lo = _limit(u_min, "--u-min") if u_min is not None else (-hi if hi is not None else None)
+    return lo, hi
+
+
+def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], list[str]]:
+    info = {k: v for k, v in controller.info.items()}
+    payload = {"kind": controller.kind, "dt": controller.dt, "inputs": list(controller.inputs),
+               "outputs": list(controller.outputs), "tracked": list(controller.tracked), "info": info}
+    if out:
+        payload["file"] = str(controller.save(out))
+    lines = [f"{controller!r}"] + [f"  {k}: {v}" for k, v in info.items() if not isinstance(v, (dict, list))]
+    if out:
+        lines.append(f"written: {out}")
+    return payload, lines
+
+
+@design.command("pid")
+@click.argument("model_path", metavar="MODEL.json")
+@click.option("--input", "input_name", default=None, help="Manipulated input (default: the model's first).")
+@click.option("--output", "output_name", default=None, help="Controlled output (default: the model's first).")
+@click.option("--velocity", default=None, metavar="Y",
+              help="Take the derivative action from this measured velocity (e.g. omega_m, the motor's) instead of "
+                   "differentiating the output: damps a two-mass resonance.")
+@click.option("--dt", "dt_text", default=None, help="Sample time [s] (default: the model's, e.g. 1/2257).")
+@click.option("--phase-margin", type=float, default=None, help="Target phase margin [deg] (default 60).")
+@click.option("--bandwidth-hz", type=float, default=None, help="Target crossover frequency [Hz] instead.")
+@click.option("--gain-margin-db", type=float, default=6.0, show_default=True, help="Least gain margin [dB].")
+@click.option("--no-derivative", is_flag=True, help="Design a PI (no derivative action).")
+@click.option("--u-min", default=None, help="Lower input limit (default: -u-max).")
+@click.option("--u-max", default=None, help="Upper input limit, e.g. 5000.")
+@click.option("--du-max", default=None, help="Largest input change per sample.")
+@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None, help="Write the controller JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print the gains and margins as JSON.")
+@_friendly
+def design_pid(model_path: str, input_name: str | None, output_name: str | None, velocity: str | None,
+               dt_text: str | None,
+               phase_margin: float | None, bandwidth_hz: float | None, gain_margin_db: float, no_derivative: bool,
+               u_min: str | None, u_max: str | None, du_max: str | None, out: str | None, as_json: bool) -> None:
+    """Tune a discrete PID on the model for a phase margin or a bandwidth; report the margins achieved.
+
+    \b
+    Example:
+      cosim design pid model.json --input Tm --output theta_L --velocity omega_m --u-max 5000 -o pid.json
+    """
+    from controllers.base import DesignModel
+    from controllers.pid import tune_pid
+
+    sys_c, dt, _ = _design_model(model_path, dt_text)
+    lo, hi = _bounds(u_min, u_max)
+    pid = tune_pid(sys_c, dt=dt, input=input_name, output=output_name, velocity=velocity, phase_margin=phase_margin,
+                   bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
+                   derivative=False if no_derivative else None, u_min=lo, u_max=hi,
+                   du_max=_limit(du_max, "--du-max"))
+    pid.design_model = DesignModel.from_statespace(sys_c, dt=dt)
+    payload, lines = _design_summary(pid, out)
+    _emit(as_json, payload, "\n".join(lines))
+
+
+@design.command("mpc")
+@click.argument("model_path", metavar="MODEL.json")
+@click.option("--input", "input_names", default=None, metavar="U,...",
+              help="Manipulated inputs (default: the model's first that is not 'const').")
+@click.option("--measured", default=None, metavar="Y,...",
+              help="Measured outputs, in the plant's order (default: all model outputs); the rest is estimated.")
+@click.option("--tracked", default=None, metavar="Y,...", help="Outputs that follow the set-point (default: the "
+              "first measured).")
+@click.option("--dt", "dt_text", default=None, help="Sample time [s] (default: the model's, e.g. 1/2257).")
+@click.option("--horizon", default=20, show_default=True, type=click.IntRange(1, 500), help="Moves N.")
+@click.option("--q", "q_text", default=None, help="Tracking-error weight (default: the MPC's).")
+@click.option("--q-rate", default=None, help="Weight on the tracked outputs' rate (damping).")
+@click.option("--r", "r_text", default=None, help="Input weight.")
+@click.option("--r-delta", default=None, help="Input-change weight.")
+@click.option("--u-min", default=None, help="Lower input bound (default: -u-max).")
+@click.option("--u-max", default=None, help="Upper input bound, e.g. 5000.")
+@click.option("--du-max", default=None, help="Largest input change per sample.")
+@click.option("--state-bound", "state_bounds", multiple=True, metavar="NAME=LOW:HIGH",
+              help="Soft bound on a state or output, e.g. omega_m=-2:2. Repeatable.")
+@click.option("--hard-state-bounds", is_flag=True, help="Make the state bounds hard (the QP may become infeasible).")
+@click.option("--disturbance", type=click.Choice(["input", "output", "none"]), default="input", show_default=True,
+              help="Disturbance model for offset-free tracking.")
+@click.option("--no-codegen", is_flag=True, help="Evaluate the QP through casadi's Python API instead of C.")
+@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None, help="Write the controller JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print the design figures as JSON.")
+@_friendly
+def design_mpc(model_path: str, input_names: str | None, measured: str | None, tracked: str | None,
+               dt_text: str | None, horizon: int, q_text: str | None, q_rate: str | None, r_text: str | None,
+               r_delta: str | None, u_min: str | None, u_max: str | None, du_max: str | None,
+               state_bounds: tuple[str, ...], hard_state_bounds: bool, disturbance: str, no_codegen: bool,
+               out: str | None, as_json: bool) -> None:
+    """Design a linear MPC (casadi, condensed QP, DAQP compiled to C) on the model.
+
+    Terminal cost from the discrete Riccati equation, input and input-rate bounds, soft state bounds,
+    offset-free tracking through a disturbance observer (steady-state Kalman filter).
+
+    \b
+    Example:
+      cosim design mpc model.json --measured theta_m,theta_L --tracked theta_L --u-max 5000 -o mpc.json
+    """
+    from controllers.mpc import MPC
+
+    sys_c, dt, _ = _design_model(model_path, dt_text)
+    lo, hi = _bounds(u_min, u_max)
+    weights = {key: parse_number(text, what=f"--{key.replace('_', '-')}")
+               for key, text in (("q", q_text), ("q_rate", q_rate), ("r", r_text), ("r_delta", r_delta)) if text}
+    mpc = MPC(sys_c, dt=dt, horizon=horizon, inputs=_names(input_names, "--input") if input_names else None,
+              outputs=_names(measured, "--measured") if measured else None,
+              tracked=_names(tracked, "--tracked") if tracked else None, u_min=lo, u_max=hi,
+              du_max=_limit(du_max, "--du-max"), state_bounds=_ranges(state_bounds, "--state-bound") or None,
+              hard_state_bounds=hard_state_bounds, disturbance=None if disturbance == "none" else disturbance,
+              codegen=not no_codegen, **weights)
+    payload, lines = _design_summary(mpc, out)
+    _emit(as_json, payload, "\n".join(lines))

@@ -1,0 +1,82 @@
+"""``cosim fmu build`` and ``cosim fmu info``: the bundled FMU built from its C source, any FMU described."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from ._command import _emit, _friendly, _resolve_fmu
+
+__all__ = ["fmu"]
+
+
+@click.group()
+def fmu() -> None:
+    """Build and inspect FMUs."""
+
+
+@fmu.command("build")
+@click.option("--fmi", "fmi_version", type=click.Choice(["2.0", "3.0"]), default="2.0", show_default=True,
+              help="FMI version of the FMU to build.")
+@click.option("--force", is_flag=True, help="Rebuild even if the cache holds it.")
+@click.option("--json", "as_json", is_flag=True, help="Print {\"path\": ...} as JSON.")
+@_friendly
+def fmu_build(fmi_version: str, force: bool, as_json: bool) -> None:
+    """Build the bundled two-mass servo FMU from its C source (cached) and print its path.
+
+    \b
+    Example:
+      cosim fmu build --fmi 3.0 --json
+    """
+    from ..plant.build import build_fmu
+
+    path = build_fmu(fmi_version=fmi_version, force=force)
+    _emit(as_json, {"path": str(path), "fmi_version": fmi_version}, str(path))
+
+
+@fmu.command("info")
+@click.argument("path")
+@click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
+@_friendly
+def fmu_info(path: str, as_json: bool) -> None:
+    """Describe an FMU: inputs, outputs, states, parameters with units and start values.
+
+    PATH is an .fmu file, or `bundled` for the bundled servo.
+
+    \b
+    Example:
+      cosim fmu info bundled
+    """
+    from ..plant.fmu_plant import open_model_description
+
+    fmu_path = _resolve_fmu(path)
+    md = open_model_description(fmu_path)
+
+    def describe(v: Any) -> dict[str, Any]:
+        d = {"name": v.name, "type": v.type, "unit": v.unit or "", "start": v.start,
+             "description": v.description or ""}
+        for key in ("min", "max"):
+            if getattr(v, key, None) not in (None, ""):
+                d[key] = getattr(v, key)
+        return d
+
+    groups = {c: [describe(v) for v in md.modelVariables if v.causality == c]
+              for c in ("input", "output", "parameter")}
+    states = [v.derivative.name for v in md.modelVariables if getattr(v, "derivative", None) is not None]
+    info = {
+        "path": str(fmu_path), "model": md.modelName, "fmi_version": md.fmiVersion,
+        "model_identifier": md.coSimulation.modelIdentifier, "generation_tool": md.generationTool,
+        "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
+        "states": states,
+        "default_step": getattr(md.defaultExperiment, "stepSize", None) if md.defaultExperiment else None,
+    }
+    lines = [f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, {md.generationTool or 'unknown tool'})",
+             f"  file: {fmu_path}"]
+    for title, key in (("inputs", "inputs"), ("outputs", "outputs"), ("parameters", "parameters")):
+        lines.append(f"  {title}:")
+        for d in info[key]:
+            rng = f"  [{d.get('min', '')}, {d.get('max', '')}]" if "min" in d or "max" in d else ""
+            lines.append(f"    {d['name']:<12} {d['start'] or '':>10} {d['unit']:<12}{rng}  {d['description']}")
+    lines.append(f"  states: {', '.join(states) or 'not declared'}")
+    _emit(as_json, info, "\n".join(lines))

@@ -1,0 +1,114 @@
+"""``cosim validate``: a controller run against an FMU in closed loop, its specs checked (and Monte Carlo)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from ..numbers import parse_number
+from ._command import _emit, _friendly, _pairs, _ranges, _resolve_fmu
+
+__all__ = ["validate_command"]
+
+
+@click.command("validate")
+@click.argument("fmu_path", metavar="FMU")
+@click.argument("controller_path", metavar="CTRL.json")
+@click.option("--scenario", "scenarios", multiple=True, metavar="KIND:amp=..,at=..",
+              help="step:amp=0.01 | ramp:amp=0.01,rate=0.02 | disturbance:amp=500,at=0.5[,input=TL]; extra "
+                   "NAME=VALUE items set FMU parameters for that scenario. Repeatable. Default: "
+                   "step:amp=0.01,at=0.05,duration=2.")
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
+              help="FMU parameter for every scenario, e.g. --set Fc=100 (Coulomb friction on). Repeatable.")
+@click.option("--spec", "specs", multiple=True, metavar="METRIC<=LIMIT",
+              help="settling_time<=1, overshoot<=10%, steady_state_error<=2e-5, input_limit<=5000, "
+                   "deadline_miss_rate<=0.001, solve_time_p99<=50us, ... Repeatable. Default: the telescope specs.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+              help="Write an HTML report (PNG plots beside it).")
+@click.option("--plots", "plots_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for the PNG plots (default: beside --report).")
+@click.option("--no-model", is_flag=True, help="Do not also run the controller against its design model.")
+@click.option("--robustness", "samples", type=click.IntRange(0, None), default=0, show_default=True,
+              help="Also validate on N plants drawn around the nominal one (Monte Carlo).")
+@click.option("--spread", default=0.2, show_default=True, type=float,
+              help="Relative spread of Jm, JL, KL, Bm, BL in the Monte Carlo (0.2 = ±20 %).")
+@click.option("--effect", "effects", multiple=True, metavar="NAME=LOW:HIGH",
+              help="Effect parameter range in the Monte Carlo, e.g. --effect Fc=0:200. Repeatable.")
+@click.option("--min-pass-rate", default=1.0, show_default=True, type=click.FloatRange(0.0, 1.0),
+              help="Exit 1 when the Monte Carlo pass rate falls below this fraction.")
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler for the Monte Carlo.")
+@click.option("--workers", type=click.IntRange(1, None), default=None, help="Local worker processes.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the Monte Carlo draws.")
+@click.option("--json", "as_json", is_flag=True,
+              help='Print {"passed", "metrics", "solve_time_us": {"median", "p99"}, "reasons", ...}.')
+@_friendly
+def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, ...], sets: tuple[str, ...],
+                     specs: tuple[str, ...], report_path: str | None, plots_dir: str | None, no_model: bool,
+                     samples: int, spread: float, effects: tuple[str, ...], min_pass_rate: float,
+                     scheduler: str | None, workers: int | None, seed: int, as_json: bool) -> None:
+    """Run a controller against an FMU in closed loop and check specs; exit 1 when one fails.
+
+    With --robustness N it also validates on N plants drawn around the nominal one (inertias, stiffness and
+    damping within ±--spread, effects within --effect ranges) through the sweep engine, and exits 1 when the
+    pass rate is below --min-pass-rate.
+
+    \b
+    Example:
+      cosim validate bundled ctrl.json --scenario step:amp=0.01,duration=2 --set Fc=100 --json
+      cosim validate bundled ctrl.json --spec settling_time<=1 --spec overshoot<=10% --report v.html
+      cosim validate bundled ctrl.json --robustness 50 --spread 0.2 --effect Fc=0:200
+    """
+    from controllers.base import load_controller
+
+    from ..loop.validation import TELESCOPE_SPECS, parse_scenario, parse_spec, validate
+    from ..loop.validation_report import write_validation_report
+
+    fmu = _resolve_fmu(fmu_path)
+    if not fmu.is_file():
+        from ..errors import FmuNotFoundError
+
+        raise FmuNotFoundError(f"FMU not found: {fmu}; build the bundled one with `cosim fmu build` or pass bundled")
+    controller = load_controller(controller_path)
+    parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
+    scenario_list = [parse_scenario(s) for s in (scenarios or ("step:amp=0.01,at=0.05,duration=2",))]
+    spec_list = [parse_spec(s) for s in (specs or TELESCOPE_SPECS)]
+    verdict = validate(fmu, controller, scenario_list, spec_list, parameters=parameters or None,
+                       model=None if no_model else "design")
+    rob = None
+    if samples:
+        from ..study.robustness import robustness
+
+        rob = robustness(fmu, controller, [s.with_effects(**parameters) for s in scenario_list], spec_list,
+                         samples=samples, spread=spread, effects=_ranges(effects, "--effect"), seed=seed,
+                         scheduler=scheduler, workers=workers)
+    payload = verdict.to_dict()
+    files: dict[str, str] = {}
+    if report_path or plots_dir:
+        target = Path(report_path) if report_path else Path(plots_dir) / "validation.html"
+        html, pngs = write_validation_report(verdict, target, controller=controller, robustness=rob,
+                                             plots_dir=plots_dir)
+        files = {"plots": [str(p) for p in pngs]}
+        if report_path:
+            files["report"] = str(html)
+        else:
+            html.unlink()
+    payload["files"] = files
+    if rob is not None:
+        payload["robustness"] = rob.to_dict()
+    solve = verdict.solve_time_us()
+    lines = [f"{'PASSED' if verdict.passed else 'FAILED'}: {controller.kind} on {fmu.name}, "
+             f"{len(scenario_list)} scenario(s), {len(spec_list)} spec(s); controller compute median "
+             f"{solve['median']:.1f} µs, p99 {solve['p99']:.1f} µs"]
+    lines += [f"  {c['scenario']}: {c['spec']} -> "
+              + ("n/a" if c["passed"] is None else f"{c['value']:.6g} {'ok' if c['passed'] else 'NOT MET'}"
+                 if c["value"] is not None else "undefined, NOT MET") for c in verdict.checks]
+    lines += [f"  reason: {r}" for r in verdict.reasons]
+    if rob is not None:
+        lines.append(f"robustness: {rob.samples} samples, pass rate {rob.pass_rate:.1%}, worst case "
+                     + ", ".join(f"{k}={v:.4g}" for k, v in rob.worst["parameters"].items()))
+    lines += [f"{k}: {v}" for k, v in files.items()]
+    _emit(as_json, payload, "\n".join(lines))
+    if not verdict.passed or (rob is not None and rob.pass_rate < min_pass_rate):
+        sys.exit(1)
