@@ -44,23 +44,24 @@ from .errors import (
     UnknownVariableError,
 )
 from .plant.build import build_fmu, fmu_cache_dir
-from .plant.fmu_plant import FmuPlant, open_model_description
+from .plant.fmu_plant import FmuPlant
+from .plant.model_description import open_model_description
 
 __version__ = "0.1.0"
 
-_LAZY = {
-    "SINDYc": "identify.sindyc",
-    "IdentifiedModel": "identify.model",
-    "SimulationResult": "identify.model",
-    "to_statespace": "export.core",
+_LAZY = {  # name -> the room that exports it
+    "SINDYc": "identify",
+    "IdentifiedModel": "identify",
+    "SimulationResult": "identify",
+    "to_statespace": "export",
     "export": "export",
-    "run_sweep": "study.sweep",
-    "SweepResult": "study.sweep",
-    "reproduce_paper": "study.reproduce",
-    "ResidualAnalysis": "diagnose.residuals",
-    "ClosedLoopResult": "loop.closed_loop",
-    "validate": "loop.validation",
-    "Verdict": "loop.validation",
+    "run_sweep": "study",
+    "SweepResult": "study",
+    "reproduce_paper": "study",
+    "ResidualAnalysis": "diagnose",
+    "ClosedLoopResult": "loop",
+    "validate": "loop",
+    "Verdict": "loop",
 }
 
 

@@ -19,7 +19,9 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_output", "check_file_format", "write_text_atomic"]
+import numpy as np
+
+__all__ = ["atomic_output", "check_file_format", "json_default", "write_text_atomic"]
 
 
 def _umask() -> int:
@@ -71,3 +73,21 @@ def check_file_format(data: Any, fmt: str, version: int, *, what: str, hint: str
         raise DataError(f"{noun} file version {data.get('version')!r} is newer than this cosim reads "
                         f"({version}); upgrade cosim")
     return data
+
+
+def json_default(value: Any) -> Any:
+    """``json.dumps(..., default=json_default)``: numpy scalars and arrays as numbers and lists, paths as text.
+
+    Examples
+    --------
+    >>> import json, numpy as np
+    >>> json.dumps({"x": np.float64(0.5), "v": np.arange(2), "p": Path("a")}, default=json_default)
+    '{"x": 0.5, "v": [0, 1], "p": "a"}'
+    """
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")

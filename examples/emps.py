@@ -58,7 +58,7 @@ from scipy.signal import decimate
 
 from cosim.data.datafile import differentiate, load_data
 from cosim.data.trajectory import Trajectory
-from cosim.diagnose.diagnosis import DiagnosisReport, diagnose
+from cosim.diagnose import DiagnosisReport, diagnose
 from cosim.errors import CosimError, InvalidSettingError
 from cosim.identify.model import IdentifiedModel
 

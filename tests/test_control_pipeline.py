@@ -12,7 +12,7 @@ from controllers.base import controller_from_json
 from controllers.mpc import MPC
 from controllers.pid import tune_pid
 from cosim import build_fmu, simulate
-from cosim.export.core import to_statespace
+from cosim.export import to_statespace
 from cosim.identify.sindyc import SINDYc
 from cosim.loop.validation import disturbance_step, setpoint_step, validate
 from cosim.study.cases import STUDY_SETTINGS

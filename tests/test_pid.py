@@ -546,7 +546,7 @@ def test_velocity_tune_on_an_identified_model(seed, friction):
     Fc = 100: settling 0.65 / 0.53 s, overshoot 7.8 / 6.1 %, sse 1.3e-5 / 1.9e-7 rad, load-step recovery
     0.92 / 0.80 s and sse 1.3e-5 / 1.1e-5 rad; true-plant margins 10.1 / 10.1 dB, 54.6 / 48.7 deg)."""
     from cosim.data.simulation import simulate
-    from cosim.export.core import to_statespace
+    from cosim.export import to_statespace
     from cosim.identify.sindyc import SINDYc
     from cosim.study.cases import STUDY_SETTINGS
     from cosim.study.paper import STATES, STUDY_X0

@@ -163,7 +163,7 @@ def test_robustness_on_a_dask_cluster_matches_local_processes(fmu):
     specs = ["settling_time<=0.9", "overshoot<=10%"]
     kwargs = {"samples": 4, "spread": 0.2, "effects": {"Fc": (0.0, 150.0)}, "seed": 1, "progress": False}
     local = robustness(fmu, StateFeedback(), "step:amp=0.01,duration=1.2", specs, workers=2, **kwargs)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster) as client:
         remote = robustness(fmu, StateFeedback(), "step:amp=0.01,duration=1.2", specs, scheduler=client, **kwargs)
     assert remote.sweep.scheduler.startswith("tcp://")

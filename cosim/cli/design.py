@@ -26,7 +26,7 @@ def design() -> None:
 
 def _design_model(model_path: str, dt_text: str | None):
     """The identified model as a continuous named StateSpace, and the controller's sample time."""
-    from ..export.core import to_statespace
+    from ..export import to_statespace
     from ..identify.model import IdentifiedModel
 
     model = IdentifiedModel.load(model_path)

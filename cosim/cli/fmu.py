@@ -48,7 +48,7 @@ def fmu_info(path: str, as_json: bool) -> None:
     Example:
       cosim fmu info bundled
     """
-    from ..plant.fmu_plant import open_model_description
+    from ..plant.model_description import open_model_description
 
     fmu_path = _resolve_fmu(path)
     md = open_model_description(fmu_path)

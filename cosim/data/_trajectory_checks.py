@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import DataError, InvalidSettingError
+from ..files import json_default
 
 __all__ = ["ROLES", "checked_fields"]
 
@@ -24,23 +24,13 @@ _TIME = "time"  # the time column's name, reserved
 ROLES = ("state", "input", "output", "reference")
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
 def _normalise_meta(meta: Mapping[str, Any] | None) -> dict[str, Any]:
     if meta is None:
         return {}
     if not isinstance(meta, Mapping):
         raise DataError(f"meta must be a dict, got {type(meta).__name__}; pass a JSON-serialisable dict")
     try:
-        return json.loads(json.dumps(dict(meta), default=_json_default))
+        return json.loads(json.dumps(dict(meta), default=json_default))
     except (TypeError, ValueError) as exc:
         raise DataError(f"meta is not JSON-serialisable ({exc}); keep it to str, numbers, lists and dicts"
                         ) from None

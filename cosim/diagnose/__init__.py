@@ -11,7 +11,7 @@
   ``_ranking``, the trial fits in ``_trials``);
 * :mod:`~cosim.diagnose.diagnosis_report` - the :class:`DiagnosisReport`.
 
-Imports the export and identify rooms and below.
+Imports the identify room and below (not export).
 """
 
 from __future__ import annotations

@@ -22,7 +22,8 @@ __all__ = ["EffectCandidate"]
 
 @dataclass(frozen=True)
 class EffectCandidate:
-    """One effect at one place with one nuisance value, scored on the integral equation error.
+    """One effect at one place with one nuisance value, as scored on the output error (free run) and judged by
+    its trial fit.
 
     Attributes
     ----------
@@ -40,8 +41,10 @@ class EffectCandidate:
         Change of BIC when added (negative: better).
     p_value : float
         Likelihood-ratio test against the model without it.
-    explained : dict of str to float
-        Per row, the fraction of the row's residual sum of squares it removes.
+    explained : dict
+        What it explains: ``size``, the share of the data's spread its fit removes (from the score test while
+        screening; from the trial fit afterwards, which adds ``plausible``, whether its parameters are
+        physically possible, and ``correlation_factor``, by which a coloured residual thins the samples).
     significant : bool
     parameters : dict of str to float
         Physical parameters from the coefficients (see :mod:`cosim.diagnose.effects`).
@@ -49,6 +52,10 @@ class EffectCandidate:
         Standard errors of the parameters where known.
     meaning : str
         The effect's physical meaning.
+    coefficients : tuple of float
+        The effect's coefficients in its rows' equations, row by row (the score test's estimate).
+    nuisance_se : float or None
+        Standard error of the nuisance parameter when the trial fit estimated it.
     """
 
     name: str

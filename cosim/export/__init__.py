@@ -1,6 +1,6 @@
 """The export room: an :class:`~cosim.identify.model.IdentifiedModel` for other tools.
 
-* :mod:`~cosim.export.core` - :func:`to_statespace`, a named python-control ``StateSpace`` (linearised at an
+* :mod:`~cosim.export.statespace` - :func:`to_statespace`, a named python-control ``StateSpace`` (linearised at an
   :func:`operating_point` when the model is nonlinear, continuous or ZOH-discrete), and what becomes of the
   model's constant term; :mod:`~cosim.export.jacobian` - the analytic Jacobian it linearises with;
 * :mod:`~cosim.export.matlab` - :func:`export_mat`, MATLAB ``.mat`` matrices;
@@ -21,9 +21,9 @@ from typing import Any
 
 from ..errors import InvalidSettingError
 from ..identify.model import IdentifiedModel
-from .core import CONSTANT_INPUT, CONSTANT_MODES, OperatingPoint, operating_point, to_statespace
 from .fmu import export_fmu
 from .matlab import export_mat
+from .statespace import CONSTANT_INPUT, CONSTANT_MODES, OperatingPoint, operating_point, to_statespace
 
 __all__ = [
     "CONSTANT_INPUT", "CONSTANT_MODES", "OperatingPoint", "export", "export_fmu", "export_mat", "operating_point",

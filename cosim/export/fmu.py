@@ -25,7 +25,7 @@ from ..files import atomic_output
 from ..identify.model import DIVERGENCE_LIMIT, IdentifiedModel
 from ..identify.terms import FUNCTIONS, Term
 from ..plant.toolchain import compile_library, find_compiler, platform_info, write_zip
-from .core import _check_dt
+from .statespace import _check_dt
 
 __all__ = ["export_fmu"]
 

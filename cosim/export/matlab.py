@@ -1,7 +1,7 @@
 """MATLAB export: the state-space form of a model as a ``.mat`` file that ``ss(...)`` builds in MATLAB.
 
 * :func:`export_mat` - ``A, B, C, D, dt``, the signal names as cell arrays of char, the operating point and the
-  identified equations (the matrices of :func:`~cosim.export.core.to_statespace`).
+  identified equations (the matrices of :func:`~cosim.export.statespace.to_statespace`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from ..files import atomic_output
 from ..identify.model import IdentifiedModel
-from .core import CONSTANT_INPUT, to_statespace
+from .statespace import CONSTANT_INPUT, to_statespace
 
 __all__ = ["export_mat"]
 

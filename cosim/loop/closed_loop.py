@@ -91,7 +91,7 @@ class ModelPlant:
             c = np.eye(len(self.states))
         else:
             if isinstance(model, IdentifiedModel):
-                from ..export.core import to_statespace
+                from ..export import to_statespace
 
                 model = to_statespace(model)
             if not isinstance(model, DesignModel):

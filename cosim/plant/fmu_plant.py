@@ -45,8 +45,7 @@ from ._fmi_callbacks import fmi2_callbacks
 from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
 from .model_description import _close_matches, open_model_description
 
-# open_model_description lives in .model_description; it is also imported from here, as before the split.
-__all__ = ["FmuPlant", "open_model_description"]
+__all__ = ["FmuPlant"]
 
 _log = logging.getLogger("cosim.fmu")
 

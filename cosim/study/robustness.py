@@ -36,7 +36,7 @@ import pandas as pd
 
 from ..errors import InvalidSettingError, UnknownVariableError
 from ..loop.validation import TELESCOPE_SPECS, Scenario, Spec, parse_scenario, parse_spec, validate
-from ..plant.fmu_plant import open_model_description
+from ..plant.model_description import open_model_description
 from .sweep import SweepResult, run_sweep
 
 __all__ = ["DEFAULT_UNCERTAIN", "RobustnessResult", "robustness"]

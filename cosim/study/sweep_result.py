@@ -16,10 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from ..errors import CosimError, DataError, FmuNotFoundError
-from ..files import check_file_format, write_text_atomic
+from ..files import check_file_format, json_default, write_text_atomic
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -68,18 +66,8 @@ class SweepError:
         return f"{self.type}: {self.message}" if self.message else self.type
 
 
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
 def _json_ready(value: Any) -> Any:
-    return json.loads(json.dumps(value, default=_json_default))
+    return json.loads(json.dumps(value, default=json_default))
 
 
 @dataclass(frozen=True)
@@ -220,7 +208,7 @@ class SweepResult:
     def to_json(self) -> str:
         """The result as JSON text; numpy values and paths in the cases are written as numbers, lists, str."""
         try:
-            return json.dumps(self.to_dict(), indent=1, default=_json_default)
+            return json.dumps(self.to_dict(), indent=1, default=json_default)
         except (TypeError, ValueError) as exc:
             raise DataError(f"the cases are not JSON-serialisable ({exc}); keep case values to numbers, str, "
                             "lists and dicts to save a sweep") from None
