@@ -5,16 +5,10 @@ import pytest
 from loop_fixtures import DT, StateFeedback, true_model
 
 from controllers.base import DesignModel
-from cosim import build_fmu
 from cosim.errors import InvalidSettingError, UnknownVariableError
 from cosim.loop.closed_loop import ModelPlant, closed_loop
 from cosim.plant.fmu_plant import FmuPlant
 from cosim.study.paper import STATES
-
-
-@pytest.fixture(scope="module")
-def fmu():
-    return build_fmu()
 
 
 def test_tracks_a_step_and_matches_the_design_model(fmu):

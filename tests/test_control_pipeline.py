@@ -11,7 +11,7 @@ import pytest
 from controllers.base import controller_from_json
 from controllers.mpc import MPC
 from controllers.pid import tune_pid
-from cosim import build_fmu, simulate
+from cosim import simulate
 from cosim.export import to_statespace
 from cosim.identify.sindyc import SINDYc
 from cosim.loop.validation import disturbance_step, setpoint_step, validate
@@ -22,11 +22,6 @@ SPECS = ["settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "in
          "constraint_violations<=0"]
 SCENARIOS = [setpoint_step(0.01, at=0.05, duration=2.0), disturbance_step(500.0, at=0.3, duration=2.0)]
 LIMITS = {"u_min": -5000.0, "u_max": 5000.0}
-
-
-@pytest.fixture(scope="module")
-def fmu():
-    return build_fmu()
 
 
 @pytest.fixture(scope="module")

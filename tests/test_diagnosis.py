@@ -25,7 +25,19 @@ MULTISINE = "multisine:amp=0.2,fmin=1,fmax=40"
 SLEW = MULTISINE + ",offset=1000"
 
 
+_RUNS: dict = {}
+
+
 def run(parameters, seed=0, excitation=MULTISINE, duration=2.0):
+    """Diagnose FMU data with `parameters` switched on (once per worker: tests that ask for the same case share
+    the report, which nothing mutates)."""
+    key = (tuple(sorted(parameters.items())), seed, excitation, duration)
+    if key not in _RUNS:
+        _RUNS[key] = _run(parameters, seed, excitation, duration)
+    return _RUNS[key]
+
+
+def _run(parameters, seed, excitation, duration):
     """Diagnose FMU data with `parameters` switched on; the linear model is identified from a multisine from
     rest on the same plant (from the data themselves when they are that experiment)."""
     fmu = build_fmu()
@@ -70,7 +82,7 @@ def test_the_undeclared_effect_ranks_first_with_its_parameter(parameters, effect
 
 
 @pytest.mark.slow
-def test_cogging_period_is_found():
+def test_cogging_period_is_found():  # the run of the cogging case above, shared (run() keeps it)
     report = run({"Tcog": 150.0}, excitation=SLEW, duration=3.0)
     assert report.effects[0].parameters["periods"] == 12.0  # the FMU's ncog
 

@@ -6,6 +6,8 @@ The data are read from ``$COSIM_EMPS_DIR`` or ``../shared/data/emps`` beside the
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import runpy
@@ -108,15 +110,25 @@ def test_inverse_force_of_the_linear_model_reproduces_the_fit(emps, records, res
     np.testing.assert_allclose(tau, expected, rtol=1e-9, atol=1e-9)
 
 
+@pytest.fixture(scope="module")
+def script(emps, tmp_path_factory):
+    """The example run once as a user runs it, ``--json --report``: what it printed, returned and wrote. Its
+    diagnosis of the linear model is the one the diagnosis tests below check (computed once: a minute)."""
+    html = tmp_path_factory.mktemp("emps") / "emps.html"
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        report = emps["main"](["--data", str(DATA), "--json", "--report", str(html)])
+    return json.loads(out.getvalue()), report, html
+
+
 @pytest.mark.slow
-def test_script_prints_json_and_asserts_its_numbers(emps, capsys, tmp_path):
-    report = emps["main"](["--data", str(DATA), "--json", "--report", str(tmp_path / "emps.html")])
-    printed = json.loads(capsys.readouterr().out)
+def test_script_prints_json_and_asserts_its_numbers(emps, script):
+    printed, report, html = script
     assert printed["before"]["Fv"] == pytest.approx(report["before"]["Fv"])
     assert [e["name"] for e in printed["effects"]][:2] == ["coulomb_friction", "viscous_asymmetry"]
     assert printed["after"]["force_error_pct"] <= 4.1 < printed["before"]["force_error_pct"]
     assert all(printed["targets"].values()), printed["targets"]
-    assert "coulomb_friction" in (tmp_path / "emps.html").read_text()
+    assert "coulomb_friction" in html.read_text()
     assert set(printed["models"]) == {"linear", "coulomb", "asymmetric"}
     assert emps["check_reference"](printed["models"]) == []
     broken = json.loads(json.dumps(printed["models"]))
@@ -125,21 +137,22 @@ def test_script_prints_json_and_asserts_its_numbers(emps, capsys, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def diagnosed(emps, records):
-    train, test = records
-    linear = emps["rigid_model"](emps["fit_rigid_model"](train, coulomb=False), dt=train.dt)
-    report, steps = emps["diagnose_emps"](train, test, linear, progress=False)
-    return report, steps, {**emps["physical"](linear), **emps["scores"](linear, train, test)}
+def diagnosed(script):
+    """The script's diagnosis of the linear rigid model on the train record (diagnose_emps): the effects found
+    (as DiagnosisReport.to_dict writes them), the model's figures after each, and the linear model's."""
+    _, report, _ = script
+    return report, report["steps"], report["before"]
 
 
 @pytest.mark.slow
 def test_diagnosis_names_coulomb_then_asymmetry(emps, diagnosed):
     report, steps, before = diagnosed
-    assert [e.name for e in report.effects][:2] == ["coulomb_friction", "viscous_asymmetry"], report.message
-    assert report.effects[0].attached_to == "qm_dot"
+    effects = report["effects"]
+    assert [e["name"] for e in effects][:2] == ["coulomb_friction", "viscous_asymmetry"], report["message"]
+    assert effects[0]["attached_to"] == "qm_dot"
     # Coulomb friction within 10 % of the published 20.39 N (an output-error estimate: 21.7 N; the inverse
     # model's least squares is 20.39); the asymmetry has the published sign and size (Fv+ - Fv- = -73.7 N s/m)
-    assert report.effects[0].parameters["Fc"] == pytest.approx(20.39, rel=0.10)
+    assert effects[0]["parameters"]["Fc"] == pytest.approx(20.39, rel=0.10)
     assert steps[1]["Fv_asym"] == pytest.approx(-73.7 / 2, rel=0.25)
 
 

@@ -29,11 +29,6 @@ from cosim import (
 DT = 1 / 2257
 
 
-@pytest.fixture(scope="module")
-def fmu():
-    return build_fmu()
-
-
 def test_discovers_inputs_outputs_states_parameters(fmu):
     with FmuPlant(fmu, dt=DT) as plant:
         assert plant.inputs == ("Tm", "TL")

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 from loop_fixtures import StateFeedback
 
-from cosim import build_fmu
 from cosim.errors import SpecError
 from cosim.loop.validation import (
     Scenario,
@@ -29,11 +28,6 @@ from cosim.study.robustness import robustness
 # The fixture controller is a state-feedback law without integral action: it tracks a step (no model error)
 # but keeps an offset under a load torque: one scenario passes, the other fails, for known reasons.
 SPECS = ["settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000"]
-
-
-@pytest.fixture(scope="module")
-def fmu():
-    return build_fmu()
 
 
 @pytest.mark.parametrize(("text", "metric", "op", "limit"), [
