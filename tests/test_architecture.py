@@ -53,27 +53,28 @@ def test_imports_follow_the_rooms_arrows_without_circles():
     assert f"Contracts: {contracts} kept, 0 broken." in result.stdout
 
 
-def test_an_upward_import_breaks_the_layers_contract(copy_of_project):
-    build = copy_of_project / "cosim" / "plant" / "build.py"
-    original = build.read_text()
-    build.write_text(original + "\nfrom ..loop.closed_loop import closed_loop  # noqa\n")
+def lint_after_appending(project: Path, module: str, text: str) -> subprocess.CompletedProcess:
+    """import-linter on `project` with `text` appended to `module` (a path inside it), which is then restored."""
+    path = project / module
+    original = path.read_text()
+    path.write_text(original + text)
     try:
-        result = lint_imports(copy_of_project)
+        return lint_imports(project)
     finally:
-        build.write_text(original)
+        path.write_text(original)
+
+
+def test_an_upward_import_breaks_the_layers_contract(copy_of_project):
+    result = lint_after_appending(copy_of_project, "cosim/plant/build.py",
+                                  "\nfrom ..loop.closed_loop import closed_loop  # noqa\n")
     assert result.returncode == 1, result.stdout
     assert "cosim.plant is not allowed to import cosim.loop" in result.stdout
 
 
 def test_a_circle_inside_a_room_breaks_the_acyclic_contract(copy_of_project):
     # trajectory is imported by simulation; the reverse import closes a circle inside the data room
-    trajectory = copy_of_project / "cosim" / "data" / "trajectory.py"
-    original = trajectory.read_text()
-    trajectory.write_text(original + "\n\ndef _circle():\n    from .simulation import simulate  # noqa\n")
-    try:
-        result = lint_imports(copy_of_project)
-    finally:
-        trajectory.write_text(original)
+    result = lint_after_appending(copy_of_project, "cosim/data/trajectory.py",
+                                  "\n\ndef _circle():\n    from .simulation import simulate  # noqa\n")
     assert result.returncode == 1, result.stdout
     assert "No cycles are allowed in cosim.data" in result.stdout
 
