@@ -20,7 +20,9 @@ __all__ = [
     "BuildError",
     "ControllerError",
     "SpecError",
+    "UnstableModelError",
     "CosimDeprecationWarning",
+    "IdentificationWarning",
 ]
 
 
@@ -89,6 +91,34 @@ class ControllerError(CosimError, RuntimeError):
 
 class SpecError(CosimError, ValueError):
     """A closed-loop scenario or specification such as ``settling_time<=0.5`` is malformed."""
+
+
+class UnstableModelError(CosimError, ValueError):
+    """An identified model is unstable where the plant that gave the data cannot be (it grows in a free run).
+
+    A ``ValueError``, as :class:`DataError` is: the fit ran, but the data and settings it was given do not
+    support a usable model (too short or too weakly exciting a record, too much noise for the equation error,
+    kinematics not pinned), and ``except ValueError`` around a fit catches bad data of every kind.
+
+    Attributes
+    ----------
+    model : object
+        The unstable model, for inspection (an :class:`~cosim.identify.model.IdentifiedModel`).
+    eigenvalues : list of complex
+        Its eigenvalues, largest real part first (empty for a nonlinear model).
+    """
+
+    #: ``cosim`` exits with status 1 (the result does not meet what was asked), not 2 (bad input).
+    exit_status = 1
+
+    def __init__(self, message: str, *, model: object = None, eigenvalues: list | None = None):
+        super().__init__(message)
+        self.model = model
+        self.eigenvalues = list(eigenvalues or [])
+
+
+class IdentificationWarning(UserWarning):
+    """Something about the data or the identified model that the user should know (cosim warning)."""
 
 
 class CosimDeprecationWarning(DeprecationWarning):

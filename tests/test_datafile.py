@@ -172,8 +172,13 @@ def test_load_data_derives_velocity_and_acceleration(mat):
     np.testing.assert_allclose(traj["qm_dot"][inner], 0.1 * w * np.cos(w * s["t"][inner]), atol=1e-6)
     np.testing.assert_allclose(traj["qm_ddot"][inner], -0.1 * w**2 * np.sin(w * s["t"][inner]),
                                atol=2e-3 * 0.1 * w**2)  # the 21-sample cubic's bias at 2 Hz, 1 kHz
+    # clean data: the window chosen from the data is the shortest (a cubic has no noise to average)
     assert traj.meta["data_file"]["derivatives"] == {"of": ["qm"], "order": 2, "method": "savitzky_golay",
-                                                     "options": {"window": 21, "polyorder": 3}}
+                                                     "options": {"window": "auto", "polyorder": 3},
+                                                     "windows": {"qm_dot": 5, "qm_ddot": 5}, "window_from": "data"}
+    fixed = load_data(mat, columns=["qm"], derive="qm", derive_window=21)
+    assert fixed.meta["data_file"]["derivatives"]["windows"] == {"qm_dot": 21}
+    assert fixed.meta["data_file"]["derivatives"]["window_from"] == "given"
     bw = load_data(mat, columns=["qm"], derive=["qm"], derive_method="butterworth", derive_options={"cutoff": 50.0})
     middle = slice(60, -60)  # beyond the zero-phase filter's edge transients
     np.testing.assert_allclose(bw["qm_dot"][middle], 0.1 * w * np.cos(w * s["t"][middle]), atol=1e-4)
@@ -196,7 +201,9 @@ def test_differentiate_settings_are_checked():
     with pytest.raises(InvalidSettingError, match="dt must be a positive"):
         differentiate(x, 0.0)
     with pytest.raises(DataError, match="has 10 samples; savitzky_golay needs at least 21"):
-        differentiate(x[:10], 0.1)
+        differentiate(x[:10], 0.1, options={"window": 21})
+    with pytest.raises(DataError, match="has 4 samples; savitzky_golay needs at least 5"):
+        differentiate(x[:4], 0.1)
     with pytest.raises(DataError, match="nan at sample 3"):
         differentiate(np.where(np.arange(100) == 3, np.nan, x), 0.1)
 
@@ -223,7 +230,8 @@ def test_too_short_says_the_minimum(tmp_path):
     s = signals(15)
     write_mat(tmp_path / "short.mat", {"t": s["t"], "qm": s["qm"]})
     with pytest.raises(DataError, match=r"has 15 samples; at least 21 are needed \(savitzky_golay with"):
-        load_data(tmp_path / "short.mat", derive=["qm"])
+        load_data(tmp_path / "short.mat", derive=["qm"], derive_window=21)
+    assert len(load_data(tmp_path / "short.mat", derive=["qm"])) == 15  # the window chosen fits the record
     assert len(load_data(tmp_path / "short.mat", derive=["qm"], derive_options={"window": 11})) == 15
 
 

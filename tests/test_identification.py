@@ -238,7 +238,7 @@ def test_unstable_model_is_recorded_and_diverges():
     u = np.sign(np.sin(np.arange(300) * 0.05))[:, None]
     data = plant.simulate([0.1], u, dt=0.01).to_trajectory()
     with pytest.warns(IdentificationWarning, match="unstable"):
-        est = SINDYc().fit(data)
+        est = SINDYc(allow_unstable=True).fit(data)  # a deliberately unstable plant
     meta = est.model_.meta
     assert meta["stable"] is False
     assert meta["eigenvalues"][0][0] == pytest.approx(0.8, rel=1e-5)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import click
@@ -10,7 +11,37 @@ import numpy as np
 from ..numbers import parse_number
 from ._command import _emit, _friendly, _names, _pairs
 
-__all__ = ["identify_command"]
+__all__ = ["identify_command", "parse_kinematics_option", "format_kinematics"]
+
+
+def parse_kinematics_option(text: str | None) -> str | dict[str, str]:
+    """The value of a ``--kinematics`` option for :class:`~cosim.identify.sindyc.SINDYc`: ``"auto"`` (also for
+    no value), ``"none"``, or a mapping from ``POS=VEL,...``.
+
+    Examples
+    --------
+    >>> parse_kinematics_option("theta_m=omega_m, theta_L=omega_L")
+    {'theta_m': 'omega_m', 'theta_L': 'omega_L'}
+    >>> parse_kinematics_option(None), parse_kinematics_option("None")
+    ('auto', 'none')
+    """
+    if text is None or text.strip().lower() in ("", "auto"):
+        return "auto"
+    if text.strip().lower() == "none":
+        return "none"
+    return {k: str(v) for k, v in _pairs(tuple(text.split(",")), "--kinematics").items()}
+
+
+def format_kinematics(pairs: tuple) -> str:
+    """One line naming the fixed kinematic rows and how each was found (``kinematics: none`` without any).
+
+    Examples
+    --------
+    >>> from cosim.identify.kinematics import KinematicPair
+    >>> format_kinematics((KinematicPair("theta_m", "omega_m", "name"), KinematicPair("x", "v", "data")))
+    "kinematics: theta_m' = omega_m (names), x' = v (data)"
+    """
+    return "kinematics: " + (", ".join(str(p) for p in pairs) if pairs else "none")
 
 
 @click.command("identify")
@@ -29,20 +60,27 @@ __all__ = ["identify_command"]
               help="integral, zoh, finite_difference, smoothed_finite_difference, savitzky_golay, spline, ...")
 @click.option("--refine/--no-refine", default=True, show_default=True,
               help="Output-error refinement (minimise the free-run simulation error).")
-@click.option("--kinematics", default=None, metavar="POS=VEL,...",
-              help="Known rows d(POS)/dt = VEL, e.g. theta_m=omega_m,theta_L=omega_L.")
+@click.option("--kinematics", default="auto", show_default=True, metavar="auto|none|POS=VEL,...",
+              help="Rows d(POS)/dt = VEL fixed exactly: detected from names and data (auto), none, or given, "
+                   "e.g. theta_m=omega_m,theta_L=omega_L.")
 @click.option("--derive", default=None, metavar="VEL=POS,...",
               help="Derive velocity states from measured positions, e.g. omega_m=theta_m.")
+@click.option("--derive-window", type=int, default=None, metavar="N",
+              help="Savitzky-Golay window of derived velocities in samples (odd); default chosen from the data.")
+@click.option("--allow-unstable", is_flag=True,
+              help="Keep an unstable identified model (with a warning) instead of failing with exit status 1.")
 @click.option("--time", "time_column", default="time", show_default=True, help="Name of the time column [s].")
 @click.option("--json", "as_json", is_flag=True, help="Print the model, equations and fit as JSON.")
 @_friendly
 def identify_command(data: str, states: str, inputs: str, out: str | None, library: str, degree: int, terms: str,
-                     threshold: str, differentiation: str, refine: bool, kinematics: str | None,
-                     derive: str | None, time_column: str, as_json: bool) -> None:
+                     threshold: str, differentiation: str, refine: bool, kinematics: str, derive: str | None,
+                     derive_window: int | None, allow_unstable: bool, time_column: str, as_json: bool) -> None:
     """Identify a SINDYc model from a data file (CSV or Parquet) and print its equations and fit.
 
     The fit is the free-run simulation of the model from the first sample, with the measured inputs held
-    between samples, against the measured states: R² and NRMSE fit % per state.
+    between samples, against the measured states: R² and NRMSE fit % per state. Kinematic rows
+    (position' = velocity) are found from the state names and the data unless --kinematics says otherwise,
+    and printed. An unstable model is an error (exit status 1, nothing written) unless --allow-unstable.
 
     \b
     Example:
@@ -50,19 +88,22 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
     """
     from ..data.trajectory import Trajectory
     from ..identify.metrics import nrmse_fit_pct, r2
-    from ..identify.sindyc import SINDYc
+    from ..identify.sindyc import IdentificationWarning, SINDYc
 
     state_names, input_names = _names(states, "--state"), _names(inputs, "--input") if inputs else []
     derived = {k: str(v) for k, v in _pairs(tuple(derive.split(",")), "--derive").items()} if derive else {}
     columns = list(dict.fromkeys([n for n in state_names if n not in derived] + list(derived.values())
                                  + input_names))
     traj = Trajectory.read(data, columns=columns, time=time_column)
-    kin = {k: str(v) for k, v in _pairs(tuple(kinematics.split(",")), "--kinematics").items()} if kinematics else None
     estimator = SINDYc(library=library, degree=degree, terms=[t for t in terms.split(";") if t.strip()],
                        threshold=threshold if threshold == "auto" else parse_number(threshold, what="--threshold"),
-                       differentiation=differentiation, kinematics=kin, velocities=derived or None,
-                       refine="output_error" if refine else None)
-    estimator.fit(traj, states=state_names, inputs=input_names)
+                       differentiation=differentiation, kinematics=parse_kinematics_option(kinematics),
+                       velocities=derived or None, derive_window=derive_window,
+                       refine="output_error" if refine else None, allow_unstable=allow_unstable)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IdentificationWarning)
+        estimator.fit(traj, states=state_names, inputs=input_names)
+    notes = [f"warning: {w.message}" for w in caught if issubclass(w.category, IdentificationWarning)]
     model = estimator.model_
     x0 = model.meta.get("x0")
     start = np.asarray(x0[0] if x0 and isinstance(x0[0], list) else x0) if x0 else None
@@ -76,13 +117,21 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
                                      strict=True))}
     if out:
         model.save(out)
+    windows = model.meta["data"].get("derive_window") or {}
     payload = {"model": str(Path(out).resolve()) if out else None, "equations": model.equations(),
                "states": list(model.states), "inputs": list(model.inputs), "threshold": estimator.threshold_,
-               "stable": model.meta.get("stable"), "simulation": sim.status, "fit": fit}
-    lines = model.equations()
+               "stable": model.meta.get("stable"), "simulation": sim.status, "fit": fit,
+               "kinematics": [p.to_dict() for p in estimator.kinematics_], "derive_window": windows,
+               "warnings": [n.removeprefix("warning: ") for n in notes]}
+    lines = model.equations() + [format_kinematics(estimator.kinematics_)]
+    if windows:
+        how = "given" if derive_window else "chosen from the data"
+        lines.append("derived: " + ", ".join(f"{v} from {derived[v]} (Savitzky-Golay window {w} samples, {how})"
+                                             for v, w in windows.items()))
     if fit:
         lines.append("free-run fit: " + ", ".join(f"{s} R2={fit['r2'][s]:.5f} NRMSE={fit['nrmse_pct'][s]:.2f} %"
                                                   for s in model.states))
+    lines += notes
     if not sim.ok:
         lines.append(f"warning: {sim.message}")
     if out:

@@ -72,7 +72,7 @@ import numpy as np
 from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
 from ._column_expressions import _evaluate, _parse_columns
 from ._measurement_files import _listing, _read_mat, _read_table, _vector
-from .derivatives import DERIVATIVE_METHODS, _method, differentiate
+from .derivatives import DERIVATIVE_METHODS, _method, _savgol_windows, differentiate
 from .trajectory import Trajectory
 
 # differentiate and DERIVATIVE_METHODS live in cosim.data.derivatives; they import from here too
@@ -181,6 +181,7 @@ def load_data(
     derive_order: int = 1,
     derive_method: str = "savitzky_golay",
     derive_options: Mapping[str, Any] | None = None,
+    derive_window: int | None = None,
     resample: bool = False,
 ) -> Trajectory:
     """Read measured data from a ``.csv``, ``.parquet`` or ``.mat`` file into a checked :class:`Trajectory`.
@@ -209,11 +210,15 @@ def load_data(
     derive_order : {1, 2}
         Velocity only, or velocity and acceleration.
     derive_method : str
-        ``"savitzky_golay"`` (default: cubic over 21 samples), ``"butterworth"`` (zero-phase low-pass at a tenth
+        ``"savitzky_golay"`` (default: a cubic over a window chosen from the data, see
+        :func:`~cosim.data.derivatives.savgol_window`), ``"butterworth"`` (zero-phase low-pass at a tenth
         of the sampling rate, order 4, then central differences) or ``"finite_difference"``; see
         :func:`differentiate`.
     derive_options : mapping, optional
         The method's options, e.g. ``{"window": 31}`` or ``{"cutoff": 100.0}``.
+    derive_window : int, optional
+        The Savitzky-Golay window in samples (odd), instead of the one chosen from the data for each signal and
+        derivative (the least estimated mean-square error); the same as ``derive_options={"window": N}``.
     resample : bool
         Put a record whose time steps are not uniform (beyond :data:`UNIFORM_RTOL` of the median step) onto the
         uniform grid ``t0 + k * dt`` (dt the median step) by linear interpolation of every column, instead of
@@ -226,7 +231,8 @@ def load_data(
         jitter is below :data:`UNIFORM_RTOL` of a step, are replaced by that grid with ``dt`` = span / steps;
         the largest shift is ``meta["data_file"]["time_jitter"]`` in s). ``meta["data_file"]`` records the file,
         its format, the time variable, each column's expression, the scalars used, the derivative method with its
-        options and any resampling; ``meta["dt"]`` is the time step. A cosim file's own meta is kept.
+        options (``windows``: the Savitzky-Golay window of each derived signal, ``window_from``: ``"data"`` or
+        ``"given"``) and any resampling; ``meta["dt"]`` is the time step. A cosim file's own meta is kept.
 
     Raises
     ------
@@ -268,6 +274,11 @@ force [] input)
         raise InvalidSettingError(f"time must be the name of the time variable, got {time!r}")
     parsed = None if columns is None else _parse_columns(columns)
     derive = (derive,) if isinstance(derive, str) else tuple(dict.fromkeys(derive))
+    if derive_window is not None:
+        if derive_method != "savitzky_golay":
+            raise InvalidSettingError(f"derive_window sets the Savitzky-Golay window; derive_method is "
+                                      f"{derive_method!r}: drop derive_window or use savitzky_golay")
+        derive_options = {**dict(derive_options or {}), "window": derive_window}
     method, options, min_derive = _method(derive_method, derive_options, derive_order) if derive else (None, {}, 0)
 
     raw, parsed = _read_mat(path, time, parsed) if kind == "mat" else _read_table(path, kind, time, parsed)
@@ -314,6 +325,7 @@ force [] input)
     file_units = {name: raw.units.get(var, "") for name, var in plain.items()}
     unit_of = {**file_units, **dict(units or {})}
     derived_units: dict[str, str] = {}
+    windows: dict[str, int] = {}
     for name in derive:
         if name not in signals:
             raise UnknownVariableError(f"derive names {name!r}, not among the columns {_listing(list(signals))}; "
@@ -322,7 +334,11 @@ force [] input)
         ordered[name] = values
         if method is not None and name in derive:
             suffixes = ("_dot", "_ddot")[:derive_order]
-            derivatives = method.function(values, dt, derive_order, **options)
+            used = dict(options)
+            if derive_method == "savitzky_golay":
+                used["window"] = _savgol_windows(values, dt, derive_order, options["window"], options["polyorder"])
+                windows.update({name + sfx: w for sfx, w in zip(suffixes, used["window"], strict=True)})
+            derivatives = method.function(values, dt, derive_order, **used)
             for suffix, power, values_d in zip(suffixes, ("/s", "/s^2")[:derive_order], derivatives, strict=True):
                 new = name + suffix
                 if new in signals or new in ordered:
@@ -343,8 +359,10 @@ force [] input)
     data_meta: dict[str, Any] = {
         "file": str(path), "format": kind, "time": raw.time,
         "columns": {c.name: c.text for c in parsed}, "scalars": scalars,
-        "derivatives": None if not derive else {"of": list(derive), "order": derive_order,
-                                                "method": derive_method, "options": options},
+        "derivatives": None if not derive else {
+            "of": list(derive), "order": derive_order, "method": derive_method, "options": options,
+            **({"windows": windows, "window_from": "data" if options["window"] == "auto" else "given"}
+               if derive_method == "savitzky_golay" else {})},
         "resampled": meta_resampled, "time_jitter": None if must_resample else time_shift,
     }
     traj = Trajectory.from_arrays(t, ordered, units={k: unit_of.get(k, "") for k in ordered},

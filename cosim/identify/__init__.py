@@ -4,6 +4,7 @@
 * :mod:`~cosim.identify.terms` - library terms as expressions (:class:`Term`), compiled right-hand sides;
 * :mod:`~cosim.identify.output_error` - refinement of a model by its free-run (output) error;
 * :mod:`~cosim.identify.model` - :class:`IdentifiedModel`: equations, simulation, JSON files;
+* :mod:`~cosim.identify.kinematics` - :func:`detect_kinematics`: which states are positions and velocities;
 * :mod:`~cosim.identify.metrics` - fit figures: R², NRMSE fit, maximum deviation, k-step-ahead error.
 
 The steps of a :class:`SINDYc` fit live in private modules, each named for its job: ``_settings`` (checks of
@@ -17,6 +18,7 @@ Imports the data and plant rooms and the foundation.
 
 from __future__ import annotations
 
+from .kinematics import KinematicPair, detect_kinematics
 from .metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_pct, r2
 from .model import DIVERGENCE_LIMIT, MODEL_FORMAT, MODEL_VERSION, IdentifiedModel, SimulationResult
 from .output_error import OutputErrorFit, refine_output_error, simulate_linear_batch
@@ -25,6 +27,7 @@ from .terms import FUNCTIONS, Term, compile_rhs, compile_rk4, polynomial_terms
 
 __all__ = [
     "DIFFERENTIATION_METHODS", "DIVERGENCE_LIMIT", "FUNCTIONS", "IdentificationWarning", "IdentifiedModel",
+    "KinematicPair", "detect_kinematics",
     "METRICS", "MIN_SAMPLES_PER_TERM", "MODEL_FORMAT", "MODEL_VERSION", "OutputErrorFit", "SINDYc",
     "SimulationResult", "Term", "compile_rhs", "compile_rk4", "k_step_ahead_error", "max_deviation_pct",
     "nrmse_fit_pct", "polynomial_terms", "r2", "refine_output_error", "simulate_linear_batch",

@@ -2,8 +2,10 @@
 
 :func:`_differentiator` makes the pysindy object for a ``differentiation`` or ``velocity_method`` name of
 :class:`~cosim.identify.sindyc.SINDYc` (:data:`~cosim.identify.sindyc.DIFFERENTIATION_METHODS`, except
-"integral" and "zoh"); :func:`_derive_velocity` uses one to derive a velocity state from a measured position
-(``velocities=``). pysindy is imported when a differentiator is first asked for.
+"integral" and "zoh"); :func:`_derive_velocity` derives a velocity state from a measured position
+(``velocities=``): by default (``"auto"``) with cosim's Savitzky-Golay derivative whose window is chosen from
+the data (:func:`cosim.data.derivatives.savgol_window`) or given (``derive_window``), else with one of pysindy's
+differentiators. pysindy is imported when a differentiator is first asked for.
 """
 
 from __future__ import annotations
@@ -33,13 +35,28 @@ def _differentiator(method: str, options: Mapping[str, Any], n: int):
 
 
 def _derive_velocity(position: np.ndarray, t: np.ndarray, name: str, method: str,
-                     options: Mapping[str, Any]) -> np.ndarray:
-    """The velocity `name` derived from samples of a `position` at times `t` by the differentiator `method`.
+                     options: Mapping[str, Any], window: int | None = None) -> tuple[np.ndarray, int | None]:
+    """The velocity `name` derived from samples of a `position` at times `t`, and the window used.
 
-    Without `options`, ``"smoothed_finite_difference"`` uses a 7-sample window and cubic smoothing (accurate
-    on clean data). A differentiator that fails raises :class:`~cosim.errors.InvalidSettingError`, one that
-    gives NaN or inf :class:`~cosim.errors.DataError`.
+    ``"auto"``: a cubic Savitzky-Golay derivative over `window` samples, or over the window with the least
+    estimated mean-square error (:func:`~cosim.data.derivatives.savgol_window`) when `window` is None.
+    Otherwise the pysindy differentiator `method` with `options` (the window is then None); without
+    `options`, ``"smoothed_finite_difference"`` uses a 7-sample window and cubic smoothing. A differentiator
+    that fails raises :class:`~cosim.errors.InvalidSettingError`, one that gives NaN or inf
+    :class:`~cosim.errors.DataError`.
     """
+    if method == "auto":
+        from scipy.signal import savgol_filter
+
+        from ..data.derivatives import savgol_window
+
+        dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+        used = int(window) if window is not None else savgol_window(position, dt)
+        used = min(used, len(position) - (len(position) % 2 == 0))
+        if used < 5:
+            raise DataError(f"deriving {name!r} needs at least 5 samples of its position; record longer")
+        value = savgol_filter(position, used, 3, deriv=1, delta=dt, mode="interp")
+        return np.asarray(value, dtype=float), used
     options = dict(options)
     if method == "smoothed_finite_difference" and not options:
         options = {"window_length": 7, "polyorder": 3}
@@ -54,4 +71,4 @@ def _derive_velocity(position: np.ndarray, t: np.ndarray, name: str, method: str
     if not np.all(np.isfinite(value)):
         raise DataError(f"deriving {name!r} with {method} gave non-finite values; "
                         "check velocity_options")
-    return value
+    return value, None

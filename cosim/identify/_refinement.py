@@ -2,7 +2,9 @@
 
 :func:`_refine` refines the non-zero coefficients of the equation-error model, and each record's initial
 state, by :func:`~cosim.identify.output_error.refine_output_error` (step 5 of the :mod:`cosim.identify.sindyc`
-docstring). With ``threshold="auto"`` it then chooses the sparsity on the output error, since equation error
+docstring), as a multi-start: the starts of :func:`_starts` (the noise-compensated fit and the uncompensated
+one), each with and without the continuation prior, the least output-error cost winning. With
+``threshold="auto"`` it then chooses the sparsity on the output error, since equation error
 cannot judge small terms on noisy data: :func:`_prune` removes coefficients by backward elimination with
 Wald tests while the output error's BIC drops (step 3 of that docstring).
 """
@@ -17,35 +19,113 @@ import numpy as np
 
 from .model import IdentifiedModel
 
+#: The continuation prior of the first refinement of each start (the other has none).
+_PRIOR = 0.1
+#: The multi-start stops once a refinement's cost is below this multiple of the white-noise floor.
+_FLOOR_MARGIN = 1.5
+
 if TYPE_CHECKING:
     from .output_error import OutputErrorFit
 
 
-def _refine(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float,
-            kin: Mapping[str, str], coef_scale: np.ndarray, meta: dict[str, Any],
+def _noise_floor(runs: Sequence[tuple[np.ndarray, np.ndarray]], meta: Mapping[str, Any]) -> float:
+    """The output-error cost white measurement noise alone gives: mean over states of (noise std / state std)^2,
+    from the noise estimated for noise compensation (0 when it was not estimated: then every start runs)."""
+    noise = meta.get("equation_error", {}).get("noise_std")
+    if not noise:
+        return 0.0
+    spread = np.vstack([x for x, _ in runs]).std(axis=0)
+    sigma = np.array(list(noise.values()), dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(spread > 0, (sigma / spread) ** 2, 0.0)
+    return float(np.mean(ratio))
+
+
+def _starts(model: IdentifiedModel, features: np.ndarray, targets: np.ndarray, rows: list[int], n_eff: float,
+            noise_var: np.ndarray | None, threshold: float | str, ridge: float, coef_scale: np.ndarray
+            ) -> list[tuple[str, IdentifiedModel]]:
+    """The equation-error starts of the refinement: `model` and, when noise compensation applied, the fit
+    without it (unless it is the same to 1e-3 of every target).
+
+    Noise compensation drops the directions whose signal is below their noise: on noisy positions the twist
+    of a stiff shaft is such a direction, and the spring it carries starts near zero, a start from which
+    output error does not find the torsional mode; the uncompensated fit is biased but keeps it.
+    """
+    from ._sparse_regression import _sparse_fit
+
+    name = "noise_compensated" if noise_var is not None and np.any(noise_var > 0) else "equation_error"
+    starts = [(name, model)]
+    if name == "noise_compensated" and rows:
+        plain = _sparse_fit(features, targets, rows, n_eff, None, threshold, ridge)
+        coef = model.coef.copy()
+        coef[rows] = plain.coef
+        if np.max(np.abs((coef - model.coef) * coef_scale)) > 1e-3:
+            starts.append(("uncompensated", IdentifiedModel(states=model.states, inputs=model.inputs,
+                                                            terms=model.terms, coef=coef, dt=model.dt)))
+    return starts
+
+
+def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[np.ndarray, np.ndarray]],
+            dt: float, kin: Mapping[str, str], coef_scale: np.ndarray, meta: dict[str, Any],
             known_x0: list[np.ndarray] | None, *, refine_options: Mapping[str, Any], refine_initial_state: bool,
             prune: bool) -> IdentifiedModel:
-    """The model refined by output error (then pruned if `prune`); records the refinement in `meta`."""
+    """The best of the output-error refinements of the `starts` (then pruned if `prune`); records them in `meta`.
+
+    A multi-start: every start (name, equation-error model) is refined with the continuation prior of
+    `refine_options` (default 0.1) and, unless the options give one, without it; the refinement of least
+    output-error cost on all data wins (every refinement's last stage minimises that same cost, so they
+    compare). ``meta["multistart"]`` lists each run's start, prior, starting and final cost and time, and
+    the winner.
+    """
     from .output_error import refine_output_error
 
-    support = model.coef != 0.0
-    for pos in kin:
-        support[model.states.index(pos)] = False
-    options = {"prior": 0.1, "continuation": True, "max_nfev": 60, **refine_options}
-    fit = refine_output_error(model, [(x, u[:-1]) for x, u in runs], dt=dt, support=support,
-                              estimate_x0=refine_initial_state and known_x0 is None, x0=known_x0,
-                              coef_scale=coef_scale, **options)
-    meta["refinement"] = {"method": "output_error", "status": fit.status, "cost": fit.cost,
-                          "cost_start": fit.cost_start, "stages": fit.stages, "options": options,
+    priors = [refine_options["prior"]] if "prior" in refine_options else [_PRIOR, 0.0]
+    order = [(s, p) for p in priors for s in starts]
+    if len(order) == 4:  # the default first, then the run that most often wins when the default fails
+        order = [order[0], order[3], order[2], order[1]]
+    runs_oe = [(x, u[:-1]) for x, u in runs]
+    floor = _noise_floor(runs, meta)
+    tried: list[dict[str, Any]] = []
+    best: tuple[Any, np.ndarray, IdentifiedModel, dict[str, Any], int] | None = None
+    seconds = 0.0
+    for (name, model), prior in order:
+        if best is not None and best[0].cost <= _FLOOR_MARGIN * floor:
+            break  # the free run already follows the data to its noise: no start can do much better
+        support = model.coef != 0.0
+        for pos in kin:
+            support[model.states.index(pos)] = False
+        options = {"prior": prior, "continuation": True, "max_nfev": 60, **refine_options}
+        options["prior"] = prior
+        fit = refine_output_error(model, runs_oe, dt=dt, support=support,
+                                  estimate_x0=refine_initial_state and known_x0 is None, x0=known_x0,
+                                  coef_scale=coef_scale, **options)
+        seconds += fit.seconds
+        tried.append({"start": name, "prior": prior, "cost_start": fit.cost_start, "cost": fit.cost,
+                      "status": fit.status, "seconds": fit.seconds})
+        if best is None or fit.cost < best[0].cost:
+            best = (fit, support, model, options, len(tried) - 1)
+    if best is None:  # pragma: no cover - there is always a start
+        raise ValueError("no start to refine")
+    fit, support, model, options, chosen = best
+    meta["multistart"] = {"method": "output-error refinement from each equation-error start, with and without "
+                                    "the continuation prior; the least output-error cost wins; stops once a "
+                                    f"cost is within {_FLOOR_MARGIN:g} x the white-noise floor",
+                          "noise_floor": floor,
+                          "chosen": {"start": tried[chosen]["start"], "prior": tried[chosen]["prior"]},
+                          "runs": tried}
+    meta["refinement"] = {"method": "output_error", "start": tried[chosen]["start"], "status": fit.status,
+                          "cost": fit.cost, "cost_start": fit.cost_start, "stages": fit.stages, "options": options,
                           "refined_coefficients": int(support.sum()),
                           "std_error": fit.std_error.tolist() if fit.std_error is not None else None}
     if prune:
+        object.__setattr__(fit, "seconds", 0.0)
         fit, support = _prune(model, runs, dt, fit, support, known_x0, coef_scale, meta,
                               refine_options=refine_options, refine_initial_state=refine_initial_state)
+        seconds += fit.seconds
         meta["refinement"].update(status=fit.status, cost=fit.cost, refined_coefficients=int(support.sum()),
                                   std_error=fit.std_error.tolist() if fit.std_error is not None else None)
     meta["x0"] = [v.tolist() for v in fit.x0]
-    meta["seconds"]["refinement"] = fit.seconds
+    meta["seconds"]["refinement"] = seconds
     return IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=fit.coef, dt=dt)
 
 

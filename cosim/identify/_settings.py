@@ -13,6 +13,8 @@ Traceback (most recent call last):
 cosim.errors.InvalidSettingError: window must be an integer >= 3, got 2
 >>> _check_mapping("kinematics", {"theta_m": "omega_m"})
 {'theta_m': 'omega_m'}
+>>> _kinematics_setting(None), _kinematics_setting("auto")
+('none', 'auto')
 """
 
 from __future__ import annotations
@@ -54,6 +56,18 @@ def _check_mapping(name: str, value: Any) -> dict[str, str]:
     return dict(value)
 
 
+def _kinematics_setting(value: Any) -> str | dict[str, str]:
+    """``kinematics=`` as "auto" (detect), "none" (off: None too) or a checked mapping position -> velocity."""
+    if value is None or (isinstance(value, str) and value.lower() == "none"):
+        return "none"
+    if isinstance(value, str):
+        if value.lower() == "auto":
+            return "auto"
+        raise InvalidSettingError(f"kinematics must be 'auto', 'none' (or None) or a mapping such as "
+                                  f"{{'theta_m': 'omega_m'}}, got {value!r}")
+    return _check_mapping("kinematics", value)
+
+
 def _check_settings(est: Any) -> None:
     """Check the settings of `est`, a :class:`~cosim.identify.sindyc.SINDYc` (its attributes, as given)."""
     if est.library not in _LIBRARIES:
@@ -83,11 +97,24 @@ def _check_settings(est: Any) -> None:
         raise InvalidSettingError("differentiation 'zoh' takes no options")
     if not isinstance(est.noise_compensation, bool):
         raise InvalidSettingError(f"noise_compensation must be True or False, got {est.noise_compensation!r}")
-    _check_mapping("kinematics", est.kinematics)
+    _kinematics_setting(est.kinematics)
     _check_mapping("velocities", est.velocities)
-    if est.velocity_method not in DIFFERENTIATION_METHODS[2:]:
-        raise InvalidSettingError(f"velocity_method must be a differentiator, one of "
+    if est.velocity_method != "auto" and est.velocity_method not in DIFFERENTIATION_METHODS[2:]:
+        raise InvalidSettingError(f"velocity_method must be 'auto' or a differentiator, one of "
                                   f"{', '.join(DIFFERENTIATION_METHODS[2:])}; got {est.velocity_method!r}")
+    if est.velocity_method == "auto" and est.velocity_options:
+        raise InvalidSettingError("velocity_method 'auto' takes no velocity_options; give derive_window=N to fix "
+                                  "its window")
+    if est.derive_window is not None:
+        _check_number("derive_window", est.derive_window, low=5, integer=True)
+        if int(est.derive_window) % 2 == 0:
+            raise InvalidSettingError(f"derive_window must be odd (samples centred on the point), got "
+                                      f"{est.derive_window!r}")
+        if est.velocity_method != "auto":
+            raise InvalidSettingError(f"derive_window sets the window of velocity_method 'auto'; with "
+                                      f"{est.velocity_method!r} give velocity_options instead")
+    if not isinstance(est.allow_unstable, bool):
+        raise InvalidSettingError(f"allow_unstable must be True or False, got {est.allow_unstable!r}")
     if est.refine not in _REFINE:
         raise InvalidSettingError(f"refine must be None or 'output_error', got {est.refine!r}")
     if not isinstance(est.refine_initial_state, bool):

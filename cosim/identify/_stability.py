@@ -19,12 +19,37 @@ Examples
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from ..errors import IdentificationWarning, UnstableModelError
 from .model import IdentifiedModel
+
+#: What to try when an identified model is unstable (the end of the error's message).
+_REMEDIES = ("fix the kinematic rows (kinematics=, --kinematics), record longer or excite more, refine by output "
+             "error (refine='output_error', --refine), or accept it with allow_unstable=True (--allow-unstable)")
+
+
+def _unstable(model: IdentifiedModel, *, allow: bool, refined: bool) -> None:
+    """Raise :class:`~cosim.errors.UnstableModelError` for an unstable model, or warn when it is allowed."""
+    eig = sorted((complex(re, im) for re, im in model.meta.get("eigenvalues", [])), key=lambda z: -z.real)
+    shown = ", ".join(f"{z.real:.4g}{z.imag:+.4g}j" if z.imag else f"{z.real:.4g}"
+                      for z in eig if z.imag >= 0)[:160] if eig else ""
+    if eig:
+        what = (f"eigenvalues with the largest real parts {shown} 1/s; above {model.meta['marginal_limit']:.3g} "
+                "1/s a mode grows more than e-fold over the record")
+    else:
+        what = model.meta.get("stability", "")
+    remedies = _REMEDIES.replace("refine by output error (refine='output_error', --refine), ", "") if refined \
+        else _REMEDIES
+    message = f"the identified model is unstable ({what})"
+    if allow:
+        warnings.warn(f"{message}; its free-run simulation diverges", IdentificationWarning, stacklevel=3)
+        return
+    raise UnstableModelError(f"{message}: {remedies}", model=model, eigenvalues=eig)
 
 
 def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -39,6 +64,7 @@ def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarr
         # a mode that grows at most e-fold over the record cannot be told from an integrator by this data
         limit = 1.0 / span
         out["eigenvalues"] = [[float(v.real), float(v.imag)] for v in eig]
+        out["marginal_limit"] = limit
         out["stable"] = bool(worst <= limit)
         kind = "stable" if worst < 0 else "marginal" if worst <= limit else "unstable"
         out["stability"] = (f"{kind}: largest real part of the eigenvalues {worst:.6g} 1/s (marginal up to "

@@ -65,27 +65,38 @@ The steps of a fit
      :func:`~cosim.study.cases.study_case` does, like the study's X, U library).
 
    The choice, the candidates and their scores are recorded in ``model_.meta["threshold"]``.
-4. **Known kinematics** (optional, ``kinematics={"theta_m": "omega_m"}``): rows such as
-   ``d theta_m/dt = omega_m`` are fixed (coefficient exactly 1), not regressed.
+4. **Kinematics** (default ``kinematics="auto"``): rows such as ``d theta_m/dt = omega_m`` are fixed
+   (coefficient exactly 1), not regressed nor refined. ``"auto"`` finds them by
+   :func:`~cosim.identify.kinematics.detect_kinematics`: name pairs (``theta_m``/``omega_m``, ``x``/``x_dot``)
+   the data do not contradict, and pairs the data show (a state equal to the running integral of another);
+   a mapping ``{"theta_m": "omega_m"}`` gives them, ``None`` or ``"none"`` fixes none. What was used is in
+   ``kinematics_`` and ``model_.meta["kinematics"]`` (position -> velocity) and
+   ``model_.meta["kinematics_found"]`` (each pair with how it was found, gain and R²).
 5. **Output-error refinement** (``refine="output_error"``): starting from the equation-error fit, the
    non-zero coefficients (sparsity pattern kept; fixed kinematic rows stay fixed) and each record's initial
    state are fitted to minimise the free-run simulation error, see :mod:`cosim.identify.output_error` (exact ZOH
    simulation and exact Jacobian for linear models, horizon continuation). This removes the bias equation
-   error has with noisy states.
+   error has with noisy states. A multi-start (:func:`cosim.identify._refinement._refine`): the
+   noise-compensated and the uncompensated equation-error fits are each refined with and without the
+   continuation prior, the least free-run cost wins (stopping once one reaches the white-noise floor);
+   ``model_.meta["multistart"]`` records every run's cost and the winner.
 
 Positions only: ``velocities={"omega_m": "theta_m"}`` derives the velocity state ``omega_m`` from the
-measured position ``theta_m`` with a smoothing differentiator (``velocity_method``, default pysindy's
-``SmoothedFiniteDifference``: Savitzky-Golay smoothing, then central differences) and fixes the kinematic
-row ``d theta_m/dt = omega_m``.
+measured position ``theta_m`` (``velocity_method="auto"``: a cubic Savitzky-Golay derivative whose window has
+the least estimated mean-square error, :func:`cosim.data.derivatives.savgol_window`, or ``derive_window``
+samples; recorded in ``model_.meta["data"]["derive_window"]``) and fixes the kinematic row
+``d theta_m/dt = omega_m``.
 
 Errors and warnings: unknown columns raise :class:`~cosim.errors.UnknownVariableError` listing the available
 ones; NaN/inf, too few samples for the library (fewer than ``MIN_SAMPLES_PER_TERM`` per term) or records of
 different steps raise :class:`~cosim.errors.DataError`; bad settings raise
 :class:`~cosim.errors.InvalidSettingError`. A constant input (not persistently exciting) gives an
-:class:`IdentificationWarning` naming it and is left out of the model. An unstable identified model gives
-an :class:`IdentificationWarning` and ``model_.meta["stable"] = False`` (with the eigenvalues of a linear
-model in ``meta["eigenvalues"]`` and a sentence in ``meta["stability"]``); its simulation returns status
-``"diverged"`` once it leaves the range. A linear model counts as unstable when an eigenvalue's real part
+:class:`IdentificationWarning` naming it and is left out of the model. An unstable identified model raises
+:class:`~cosim.errors.UnstableModelError` (its eigenvalues and what to try in the message, the model in its
+``model`` attribute); with ``allow_unstable=True`` it gives an :class:`IdentificationWarning` instead and
+``model_.meta["stable"] = False`` (with the eigenvalues of a linear model in ``meta["eigenvalues"]`` and a
+sentence in ``meta["stability"]``); its simulation returns status ``"diverged"`` once it leaves the range. A
+linear model counts as unstable when an eigenvalue's real part
 exceeds ``1/T`` (T the record length): a mode growing at most e-fold over the record is reported as
 marginal (``stable`` True), since the data cannot tell it from an integrator (the two-mass servo has an
 exact integrator, its rigid-body position, which noisy data identifies as a slightly positive or negative
@@ -115,15 +126,16 @@ from typing import Any
 import numpy as np
 
 from ..data.trajectory import Trajectory
-from ..errors import DataError, InvalidSettingError
+from ..errors import DataError, IdentificationWarning, InvalidSettingError
 from ._differentiation import _derive_velocity
 from ._equation_error import _equations, _window
 from ._library import _kinematic_rows, _library_terms
 from ._records import _known_initial_states, _measured, _prepare, _stacked
-from ._refinement import _refine
-from ._settings import DIFFERENTIATION_METHODS, _check_mapping, _check_settings
+from ._refinement import _refine, _starts
+from ._settings import DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
 from ._sparse_regression import _sparse_fit
-from ._stability import _stability
+from ._stability import _stability, _unstable
+from .kinematics import _find_kinematics
 from .model import IdentifiedModel, SimulationResult
 from .terms import Term
 
@@ -131,10 +143,6 @@ __all__ = ["SINDYc", "IdentificationWarning", "DIFFERENTIATION_METHODS", "MIN_SA
 
 #: A fit needs at least this many samples per library term.
 MIN_SAMPLES_PER_TERM = 10
-
-
-class IdentificationWarning(UserWarning):
-    """Something about the data or the identified model that the user should know (cosim warning)."""
 
 
 class SINDYc:
@@ -176,18 +184,22 @@ class SINDYc:
         and drop the directions of the normal equations whose signal does not exceed their noise (their
         coefficients take the minimum-norm value). Removes most of the errors-in-variables bias of equation
         error with noisy states; no effect on clean data.
-    kinematics : mapping, optional
-        Known kinematic rows, position state -> velocity state: ``d position/dt = velocity`` with coefficient
-        exactly 1, not regressed (and not refined).
+    kinematics : "auto", "none", None or mapping
+        Kinematic rows ``d position/dt = velocity``, coefficient exactly 1, not regressed (nor refined):
+        ``"auto"`` detects them from the state names and data (module docstring), a mapping position state ->
+        velocity state gives them, ``None`` or ``"none"`` fixes none.
     velocities : mapping, optional
         Velocity states to derive from measured positions, velocity name -> position column
         (``{"omega_m": "theta_m"}``); implies the kinematic row. A column of the velocity's name, if the data
         has one, is ignored.
     velocity_method : str
-        Smoothing differentiator for `velocities` (a pysindy differentiator name).
+        Differentiator for `velocities`: ``"auto"`` (a cubic Savitzky-Golay derivative, window chosen from the
+        data) or a pysindy differentiator name.
     velocity_options : mapping, optional
-        Its options (default ``{"window_length": 7, "polyorder": 3}`` for the default method: accurate on clean
-        data; widen the window for noisy positions).
+        Options of a pysindy `velocity_method` (``"smoothed_finite_difference"``: default
+        ``{"window_length": 7, "polyorder": 3}``).
+    derive_window : int, optional
+        Window of the ``"auto"`` derivative in samples (odd, >= 5) instead of the one chosen from the data.
     refine : {None, "output_error"}
         Refine the equation-error fit by output error (:mod:`cosim.identify.output_error`).
     refine_initial_state : bool
@@ -195,6 +207,9 @@ class SINDYc:
     refine_options : mapping, optional
         Passed to :func:`cosim.identify.output_error.refine_output_error`: ``prior`` (default 0.1), ``continuation``
         (default True), ``max_nfev`` (per stage, default 60).
+    allow_unstable : bool
+        Keep an unstable identified model with an :class:`IdentificationWarning` instead of raising
+        :class:`~cosim.errors.UnstableModelError`.
 
     Attributes
     ----------
@@ -208,6 +223,9 @@ class SINDYc:
         the equation-error and refinement results, stability and timing.
     states_, inputs_ : tuple of str
         The model's states and inputs (constant inputs are left out).
+    kinematics_ : tuple of KinematicPair
+        The fixed kinematic rows, each with how it was found (``"name"``, ``"data"``, ``"given"``,
+        ``"derived"``).
 
     Examples
     --------
@@ -225,11 +243,11 @@ class SINDYc:
     def __init__(self, *, library: str = "linear", degree: int = 2, terms: Sequence[str] = (),
                  include_constant: bool = True, threshold: float | str = "auto", ridge: float = 0.0,
                  differentiation: str = "integral", differentiation_options: Mapping[str, Any] | None = None,
-                 noise_compensation: bool = True, kinematics: Mapping[str, str] | None = None,
-                 velocities: Mapping[str, str] | None = None,
-                 velocity_method: str = "smoothed_finite_difference",
-                 velocity_options: Mapping[str, Any] | None = None, refine: str | None = None,
-                 refine_initial_state: bool = True, refine_options: Mapping[str, Any] | None = None) -> None:
+                 noise_compensation: bool = True, kinematics: Mapping[str, str] | str | None = "auto",
+                 velocities: Mapping[str, str] | None = None, velocity_method: str = "auto",
+                 velocity_options: Mapping[str, Any] | None = None, derive_window: int | None = None,
+                 refine: str | None = None, refine_initial_state: bool = True,
+                 refine_options: Mapping[str, Any] | None = None, allow_unstable: bool = False) -> None:
         self.library = library
         self.degree = degree
         self.terms = tuple(terms) if not isinstance(terms, str) else (terms,)
@@ -243,9 +261,11 @@ class SINDYc:
         self.velocities = velocities
         self.velocity_method = velocity_method
         self.velocity_options = dict(velocity_options or {})
+        self.derive_window = derive_window
         self.refine = refine
         self.refine_initial_state = refine_initial_state
         self.refine_options = dict(refine_options or {})
+        self.allow_unstable = allow_unstable
         _check_settings(self)
 
     # -------------------------------------------------------------------------------------------- settings
@@ -261,11 +281,14 @@ class SINDYc:
                 "include_constant": self.include_constant, "threshold": self.threshold, "ridge": self.ridge,
                 "differentiation": self.differentiation,
                 "differentiation_options": dict(self.differentiation_options),
-                "noise_compensation": self.noise_compensation, "kinematics": dict(self.kinematics or {}),
+                "noise_compensation": self.noise_compensation,
+                "kinematics": (dict(self.kinematics) if isinstance(self.kinematics, Mapping)
+                               else _kinematics_setting(self.kinematics)),
                 "velocities": dict(self.velocities or {}),
                 "velocity_method": self.velocity_method, "velocity_options": dict(self.velocity_options),
+                "derive_window": self.derive_window,
                 "refine": self.refine, "refine_initial_state": self.refine_initial_state,
-                "refine_options": dict(self.refine_options)}
+                "refine_options": dict(self.refine_options), "allow_unstable": self.allow_unstable}
 
     # -------------------------------------------------------------------------------------------- fitting
     def fit(self, data: Trajectory | Sequence[Trajectory], *, states: Sequence[str] | None = None,
@@ -290,7 +313,7 @@ class SINDYc:
 
         Raises
         ------
-        UnknownVariableError, DataError, InvalidSettingError
+        UnknownVariableError, DataError, InvalidSettingError, UnstableModelError
             See the module docstring.
 
         Examples
@@ -305,13 +328,16 @@ class SINDYc:
         """
         started = time.perf_counter()
         _check_settings(self)
+        self._windows: dict[str, list[int]] = {}
         records = _prepare(data, states, inputs, _check_mapping("velocities", self.velocities), self._velocity)
         for name, value in records.constant_inputs.items():
             warnings.warn(f"input {name!r} is constant ({value:g}) in the data: it is not persistently "
                           "exciting, so its effect cannot be identified; it is left out of the model "
                           "(excite it, or pass inputs=[...] without it)", IdentificationWarning, stacklevel=2)
         runs, state_names, input_names, dt = records.runs, records.states, records.inputs, records.dt
-        kin = _kinematic_rows(self.kinematics, self.velocities, state_names)
+        pairs = _find_kinematics(self.kinematics, self.velocities, state_names, runs, dt)
+        kin = _kinematic_rows({p.position: p.velocity for p in pairs if p.found != "derived"}, self.velocities,
+                              state_names)
         known_x0 = _known_initial_states(x0, state_names, len(runs))
         library = _library_terms(self.library, self.degree, self.include_constant, self.terms, state_names,
                                  input_names, kin)
@@ -348,15 +374,19 @@ class SINDYc:
             "data": {"records": len(runs), "samples": [len(x) for x, _ in runs], "dt": dt,
                      "equations": int(features.shape[0]), "independent_equations": float(n_eff),
                      "dropped_inputs": list(records.constant_inputs),
-                     "derived_velocities": dict(self.velocities or {})},
-            "kinematics": kin, "equation_error": ee_meta, "seconds": {"equation_error": ee_seconds},
+                     "derived_velocities": dict(self.velocities or {}),
+                     "derive_window": {v: w[0] if len(set(w)) == 1 else w for v, w in self._windows.items()}},
+            "kinematics": kin, "kinematics_found": [p.to_dict() for p in pairs],
+            "equation_error": ee_meta, "seconds": {"equation_error": ee_seconds},
         }
         model = IdentifiedModel(states=tuple(state_names), inputs=tuple(input_names), terms=tuple(library),
                                 coef=coef, dt=dt, units=units, meta=meta)
         if known_x0 is not None:
             meta["x0_known"] = [v.tolist() for v in known_x0]
         if self.refine == "output_error":
-            model = _refine(model, runs, dt, kin, sparse.coef_scale, meta, known_x0,
+            starts = _starts(model, features, targets, free_rows, n_eff, noise_var, ee_threshold, self.ridge,
+                             sparse.coef_scale)
+            model = _refine(starts, runs, dt, kin, sparse.coef_scale, meta, known_x0,
                             refine_options=self.refine_options, refine_initial_state=self.refine_initial_state,
                             prune=self.threshold == "auto")
             if self.threshold == "auto":
@@ -365,10 +395,9 @@ class SINDYc:
         meta.update(_stability(model, runs, dt))
         model = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=model.coef,
                                 dt=dt, units=units, meta=meta)
+        self.kinematics_ = pairs
         if meta["stable"] is False:
-            warnings.warn(f"the identified model is unstable ({meta['stability']}); its free-run simulation "
-                          "diverges: add data that excites the slow modes, use refine='output_error', or fix "
-                          "known rows with kinematics=", IdentificationWarning, stacklevel=2)
+            _unstable(model, allow=self.allow_unstable, refined=self.refine == "output_error")
         self.model_ = model
         self.coef_ = model.coef
         self.terms_ = model.terms
@@ -379,8 +408,13 @@ class SINDYc:
 
     # -- data
     def _velocity(self, position: np.ndarray, t: np.ndarray, name: str) -> np.ndarray:
-        """The velocity state `name` derived from a measured position, by ``velocity_method``."""
-        return _derive_velocity(position, t, name, self.velocity_method, self.velocity_options)
+        """The velocity state `name` derived from a measured position, by ``velocity_method`` (the window used
+        is recorded for the model's meta)."""
+        value, window = _derive_velocity(position, t, name, self.velocity_method, self.velocity_options,
+                                         self.derive_window)
+        if window is not None and hasattr(self, "_windows"):
+            self._windows.setdefault(name, []).append(window)
+        return value
 
     # -------------------------------------------------------------------------------------------- use
     def _fitted(self) -> IdentifiedModel:
@@ -547,6 +581,6 @@ class SINDYc:
 
 _DEFAULTS = {"library": "linear", "degree": 2, "terms": [], "include_constant": True, "threshold": "auto",
              "ridge": 0.0, "differentiation": "integral", "differentiation_options": {}, "noise_compensation": True,
-             "kinematics": {},
-             "velocities": {}, "velocity_method": "smoothed_finite_difference", "velocity_options": {},
-             "refine": None, "refine_initial_state": True, "refine_options": {}}
+             "kinematics": "auto", "velocities": {}, "velocity_method": "auto", "velocity_options": {},
+             "derive_window": None, "refine": None, "refine_initial_state": True, "refine_options": {},
+             "allow_unstable": False}
