@@ -37,7 +37,7 @@ from scipy.linalg import expm
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..files import check_file_format, write_text_atomic
-from .terms import Term, compile_rhs, compile_rk4
+from .terms import Term, compile_rhs, compile_rk4, compile_rk4_casadi
 
 __all__ = ["IdentifiedModel", "SimulationResult", "MODEL_FORMAT", "MODEL_VERSION", "DIVERGENCE_LIMIT"]
 
@@ -285,13 +285,35 @@ class IdentifiedModel:
         if nsub < 1:
             raise InvalidSettingError(f"nsub must be at least 1, got {nsub}")
         run = self.__dict__.get("_rk4")
-        if run is None:  # generated on the first nonlinear simulation, then kept (terms.compile_rk4)
-            run = compile_rk4(self.states, self.inputs, self._parsed, self.coef)
+        if run is None:  # made on the first nonlinear simulation, then kept
+            try:  # CasADi steps it several times faster than the generated Python (terms.compile_rk4)
+                run = (compile_rk4_casadi(self.states, self.inputs, self._parsed, self.coef), True)
+            except ImportError:
+                run = (compile_rk4(self.states, self.inputs, self._parsed, self.coef), False)
             object.__setattr__(self, "_rk4", run)
-        status, k, states = run(x[0].tolist(), u.tolist(), dt / nsub, nsub, DIVERGENCE_LIMIT)
-        if states:
+        step, takes_arrays = run  # the CasADi run takes the arrays as they are (no list round trip)
+        status, k, states = step(x[0] if takes_arrays else x[0].tolist(), u if takes_arrays else u.tolist(),
+                                 dt / nsub, nsub, DIVERGENCE_LIMIT)
+        if len(states):
             x[1:len(states) + 1] = states
         return status, k
+
+    def state_jacobian(self, x: np.ndarray, u: np.ndarray | None = None) -> np.ndarray:
+        """The exact Jacobian ``d(dx/dt)/dx`` at each sample, shape (n_samples, n_states, n_states): each term's
+        derivative by forward mode over its expression (:meth:`~cosim.identify.terms.Term.derivative`)."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        u = np.zeros((len(x), 0)) if u is None else np.asarray(u, dtype=float).reshape(len(x), len(self.inputs))
+        values = {name: x[:, i] for i, name in enumerate(self.states)}
+        values.update({name: u[:, j] for j, name in enumerate(self.inputs)})
+        jac = np.zeros((len(x), len(self.states), len(self.states)))
+        for k, term in enumerate(self._parsed):
+            if not np.any(self.coef[:, k] != 0.0):
+                continue
+            for j, name in enumerate(self.states):
+                d = term.derivative(values, name)
+                if not (isinstance(d, float) and d == 0.0):
+                    jac[:, :, j] += self.coef[:, k] * np.asarray(d, dtype=float)[..., None]
+        return jac
 
     # ------------------------------------------------------------------ text and files
     def equations(self, precision: int = 6) -> list[str]:
