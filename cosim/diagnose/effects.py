@@ -8,7 +8,12 @@ Every effect is registered by name (:data:`EFFECTS`, :func:`register_effect`) wi
   ``p' = v`` is a position with velocity ``v``; two positions whose equations' rows share a term in both
   are coupled; the model's inputs are the inputs;
 * the **nuisance parameter** it searches on its own (a smoothing velocity, a width, a period, a delay), with a
-  grid built from the data (:meth:`Effect.grid`), refined afterwards by a bounded scalar search;
+  grid built from the physics of the record (:meth:`Effect.grid`: the sample time, the record's length, the
+  signals' ranges and noise, see :mod:`~cosim.diagnose._record_band`), refined afterwards by a bounded scalar
+  search. Where the record cannot show an effect (a period faster than the sampling, fewer than two periods
+  over the travel, a Stribeck velocity the speeds never cross) the grid is empty and the effect is not tried;
+* a **selection** (:func:`effect_selection`): ``"all"``, names, or a name with its nuisance fixed
+  (``"cogging:periods=120"``), which is then tried at that value only;
 * the **terms** it adds, as cosim term expressions (:mod:`cosim.identify.terms`: the augmented model simulates, saves
   and exports like any other). A delay cannot be written as a term: it adds a delayed copy of the input as
   a new data column (:meth:`Effect.columns`) and the model uses it in place of the input;
@@ -16,7 +21,8 @@ Every effect is registered by name (:data:`EFFECTS`, :func:`register_effect`) wi
   divided by the row's input gain (``-c/b`` for a friction term, which opposes the motion).
 
 The catalogue: ``coulomb_friction``, ``viscous_asymmetry``, ``stribeck``, ``backlash``, ``deadzone``,
-``saturation``, ``cogging``, ``gravity``, ``offset``, ``delay``, ``cubic_stiffness``.
+``saturation``, ``cogging``, ``gravity``, ``offset``, ``delay``, ``cubic_stiffness`` (on one position, a
+Duffing spring to ground ``x**3``, or between two, ``(a-b)**3``).
 
 Examples
 --------
@@ -24,6 +30,8 @@ Examples
 ['backlash', 'cogging', 'coulomb_friction', 'cubic_stiffness']
 >>> EFFECTS["coulomb_friction"].terms(Attachment("omega_m", ("omega_m",), ("omega_m",)), 0.01)
 ('tanh(omega_m/0.01)',)
+>>> effect_selection("coulomb_friction,cogging:periods=12").specs
+('coulomb_friction', 'cogging:periods=12')
 """
 
 from __future__ import annotations
@@ -36,8 +44,11 @@ import numpy as np
 
 from ..errors import InvalidSettingError, UnknownVariableError
 from ..identify.model import IdentifiedModel
+from . import _record_band as rb
+from ._record_band import RecordBand
 
-__all__ = ["EFFECTS", "Attachment", "Effect", "Roles", "register_effect"]
+__all__ = ["EFFECTS", "Attachment", "Effect", "EffectSelection", "RecordBand", "Roles", "effect_selection",
+           "register_effect"]
 
 
 def _num(value: float) -> str:
@@ -175,7 +186,7 @@ class Effect:
 
     name: str
     meaning: str
-    attaches_to: str  # "velocity", "position", "pair", "input" or "none"
+    attaches_to: str  # "velocity", "position", "pair", "position_or_pair", "input" or "none"
     nuisance: str | None
     unit: str  # of the nuisance: "velocity", "position", "twist", "input", "samples", "periods" or ""
     make_terms: Callable[[Attachment, float | None], tuple[str, ...]]
@@ -192,27 +203,44 @@ class Effect:
     #: that clips rather than amplifies); an implausible fit is not a finding, however well it scores.
     plausible: Callable[[dict[str, float]], bool] | None = None
     physical: Callable[[dict[str, np.ndarray], float, Roles, Attachment], float | None] | None = None
+    #: The nuisance's range the record can show at an attachment, from its signal and the record
+    #: (:mod:`~cosim.diagnose._record_band`); None from it: the effect cannot be identified there. For an effect
+    #: without a nuisance, any range means "identifiable". Without a rule: the grid is `grid_fractions` of the
+    #: signal's largest value.
+    span: Callable[[np.ndarray, RecordBand, str], tuple[float, float] | None] | None = None
+    #: The grid over the span (default: logarithmic, about 3 apart), from (lo, hi, the signal).
+    make_grid: Callable[[float, float, np.ndarray], list[float]] | None = None
 
     def attachments(self, roles: Roles) -> list[Attachment]:
         """Every place the effect could act in a model with these `roles`."""
         dyn = roles.dynamic_rows
         if self.attaches_to == "velocity":
             return [Attachment(v, (v,), dyn) for v in roles.velocities]
-        if self.attaches_to == "position":
-            return [Attachment(p, (p,), dyn) for p in roles.positions]
-        if self.attaches_to == "pair":
-            out = []
-            for a, b in roles.pairs:
-                rows = tuple(r for r in dyn)
-                out.append(Attachment(f"{a}-{b}", (a, b), rows))
+        out = []
+        if self.attaches_to in ("position", "position_or_pair"):
+            out += [Attachment(p, (p,), dyn) for p in roles.positions]
+        if self.attaches_to in ("pair", "position_or_pair"):
+            out += [Attachment(f"{a}-{b}", (a, b), dyn) for a, b in roles.pairs]
+        if self.attaches_to in ("position", "pair", "position_or_pair"):
             return out
         if self.attaches_to == "input":  # the inputs as measured, not the delayed copies a delay adds
             return [Attachment(u, (u,), roles.rows_for_input(u)) for u in roles.inputs
                     if roles.rows_for_input(u) and delayed_source(u) is None]
         return [Attachment("constant", (), dyn)]
 
-    def grid(self, attachment: Attachment, data: Mapping[str, np.ndarray]) -> list[float | None]:
-        """Candidate values of the nuisance parameter, scaled to the data."""
+    def grid(self, attachment: Attachment, data: Mapping[str, np.ndarray],
+             band: RecordBand | None = None) -> list[float | None]:
+        """Candidate values of the nuisance parameter, from the data (`data`: the model's free run) and the record
+        (`band`: sample time, length, noise levels; without it, none of their limits apply). Empty when the
+        record cannot show the effect at `attachment` ([None] for an effect without a nuisance that it can)."""
+        if self.span is not None:
+            span = self.nuisance_span(attachment, data, band)
+            if span is None:
+                return []
+            if self.nuisance is None:
+                return [None]
+            signal = self.signal(attachment, data)
+            return (self.make_grid or (lambda lo, hi, _: rb.log_grid(lo, hi)))(span[0], span[1], signal)
         if self.nuisance is None:
             return [None]
         if self.integer:
@@ -221,6 +249,21 @@ class Effect:
         scale = float(np.max(np.abs(signal))) if signal.size else 1.0
         scale = scale if scale > 0 else 1.0
         return [f * scale for f in self.grid_fractions]
+
+    def nuisance_span(self, attachment: Attachment, data: Mapping[str, np.ndarray],
+                      band: RecordBand | None = None) -> tuple[float, float] | None:
+        """The range of the nuisance the record shows at `attachment` (None: it cannot show the effect there;
+        ``(0, inf)`` for an effect without a rule)."""
+        if self.span is None:
+            return (0.0, math.inf)
+        band = band if band is not None else RecordBand.of(data)
+        return self.span(self.signal(attachment, data), band, attachment.label)
+
+    def admits(self, value: float, attachment: Attachment, data: Mapping[str, np.ndarray],
+               band: RecordBand | None = None) -> bool:
+        """Whether a given nuisance `value` lies in the range the record shows at `attachment`."""
+        span = self.nuisance_span(attachment, data, band)
+        return span is not None and span[0] * (1 - 1e-9) <= value <= span[1] * (1 + 1e-9)
 
     def signal(self, attachment: Attachment, data: Mapping[str, np.ndarray]) -> np.ndarray:
         """The signal the nuisance parameter is measured on (the twist for a pair)."""
@@ -285,14 +328,81 @@ def register_effect(effect: Effect) -> Effect:
     return effect
 
 
-def effect_names(selection: str | Sequence[str] = "all") -> list[str]:
-    """Catalogue names from ``"all"``, a comma-separated string or a list; unknown names are refused."""
-    if isinstance(selection, str):
-        selection = list(EFFECTS) if selection.strip() == "all" else [s.strip() for s in selection.split(",")]
-    unknown = [s for s in selection if s not in EFFECTS]
-    if unknown:
-        raise UnknownVariableError(f"no effect named {unknown[0]!r} in the catalogue; known: {', '.join(EFFECTS)}")
-    return list(selection)
+@dataclass(frozen=True)
+class EffectSelection:
+    """Which catalogued effects a diagnosis tries, and the nuisance values given for some of them.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Catalogue names, in the catalogue's order for ``"all"``, else as given.
+    fixed : dict
+        Per name, the nuisance value it is tried at (not gridded, not refined).
+    """
+
+    names: tuple[str, ...]
+    fixed: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def specs(self) -> tuple[str, ...]:
+        """The selection written back as text items (``"cogging:periods=120"`` for a fixed value)."""
+        return tuple(f"{n}:{EFFECTS[n].nuisance}={self.fixed[n]:.12g}" if n in self.fixed else n for n in self.names)
+
+
+def effect_selection(selection: str | Sequence[str] | EffectSelection = "all") -> EffectSelection:
+    """Parse a selection: ``"all"``, comma-separated names, or a list of them; an item ``name:nuisance=value``
+    (``"cogging:periods=120"``) tries that effect at that nuisance value only. ``"all"`` may be combined with
+    fixed items (``"all,cogging:periods=120"``). Unknown names and bad values are refused in one line.
+
+    Examples
+    --------
+    >>> sel = effect_selection("coulomb_friction, cogging:periods=120")
+    >>> sel.names, dict(sel.fixed)
+    (('coulomb_friction', 'cogging'), {'cogging': 120.0})
+    """
+    if isinstance(selection, EffectSelection):
+        return selection
+    items = [s.strip() for s in selection.split(",")] if isinstance(selection, str) else [str(s).strip()
+                                                                                          for s in selection]
+    items = [s for s in items if s]
+    names: list[str] = []
+    fixed: dict[str, float] = {}
+    for item in items or ["all"]:
+        if item == "all":
+            names += [n for n in EFFECTS if n not in names]
+            continue
+        name, _, setting = item.partition(":")
+        name = name.strip()
+        if name not in EFFECTS:
+            raise UnknownVariableError(f"no effect named {name!r} in the catalogue; known: {', '.join(EFFECTS)}")
+        if setting:
+            fixed[name] = _fixed_value(EFFECTS[name], item, setting)
+        if name not in names:
+            names.append(name)
+    return EffectSelection(tuple(names), fixed)
+
+
+def _fixed_value(effect: Effect, item: str, setting: str) -> float:
+    key, eq, text = setting.partition("=")
+    if effect.nuisance is None:
+        raise InvalidSettingError(f"{item!r}: {effect.name} has no nuisance parameter to fix; write {effect.name!r}")
+    if not eq or key.strip() != effect.nuisance:
+        raise InvalidSettingError(f"{item!r}: write {effect.name}:{effect.nuisance}=VALUE")
+    try:
+        value = float(text)
+    except ValueError:
+        raise InvalidSettingError(f"{item!r}: {effect.nuisance} must be a number, got {text.strip()!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise InvalidSettingError(f"{item!r}: {effect.nuisance} must be positive, got {text.strip()}")
+    if effect.integer and not value.is_integer():
+        raise InvalidSettingError(f"{item!r}: {effect.nuisance} counts whole {effect.unit}, got {text.strip()}")
+    return value
+
+
+def effect_names(selection: str | Sequence[str] | EffectSelection = "all") -> list[str]:
+    """The selection's items (see :func:`effect_selection`): catalogue names, and ``name:nuisance=value`` for
+    an effect given a fixed nuisance value; unknown names are refused."""
+    return list(effect_selection(selection).specs)
 
 
 # ---------------------------------------------------------------------------------------------- parameter helpers
@@ -400,17 +510,31 @@ def _delay_params(coef, value, roles, attachment):
 
 
 def _cubic_params(coef, value, roles, attachment):
-    return {f"coef_{row}": float(values[0]) for row, values in coef.items()}
+    """``k3``, the cubic spring's stiffness (force per unit cubed): ``-c / b`` in the row of the (first) position's
+    own velocity, where the spring pulls it back; ``+c / b`` in the second position's row, which the twist pulls
+    the other way; else ``-c / b`` in the first row with a known gain. The coefficients per row beside it."""
+    own = [roles.velocity_of.get(s) for s in attachment.signals]
+    choices = [(own[0], -1.0)] + ([(own[1], 1.0)] if len(own) == 2 else []) + [(row, -1.0) for row in coef]
+    k3 = math.nan
+    for row, sign in choices:
+        if row in coef and roles.gain(row):
+            k3 = sign * float(coef[row][0]) / roles.gain(row)
+            break
+    return {"k3": k3, **{f"coef_{row}": float(values[0]) for row, values in coef.items()}}
+
+
+def _cubic_terms(a: Attachment, v: float | None) -> tuple[str, ...]:
+    s = a.signals
+    return (f"{s[0]}**3",) if len(s) == 1 else (f"({s[0]}-{s[1]})**3",)
 
 
 # ---------------------------------------------------------------------------------------------- the catalogue
-#: Whole-sample delays the screening tries (a fitted delay at the last one is at the edge: not a finding).
-_DELAYS = tuple(float(d) for d in (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30, 40, 50))
 register_effect(Effect(
     "coulomb_friction", "Coulomb friction: a force of constant size opposing the motion (smooth near zero speed)",
     "velocity", "smoothing_velocity", "velocity",
     lambda a, v: (f"tanh({a.signals[0]}/{_num(v)})",), _friction_params("Fc"),
-    grid_fractions=(3e-4, 1e-3, 3e-3, 1e-2, 3e-2), plausible=lambda p: not p["Fc"] <= 0.0))
+    grid_fractions=(3e-4, 1e-3, 3e-3, 1e-2, 3e-2), plausible=lambda p: not p["Fc"] <= 0.0,
+    span=rb.smoothing_span))
 register_effect(Effect(
     "viscous_asymmetry", "viscous friction that differs between positive and negative speed (|v| term)",
     "velocity", None, "", lambda a, v: (f"abs({a.signals[0]})",), _friction_params("viscous_asymmetry")))
@@ -418,7 +542,8 @@ register_effect(Effect(
     "stribeck", "Stribeck effect: extra friction at low speed (stiction) fading over the Stribeck velocity vs",
     "velocity", "vs", "velocity",
     lambda a, v: (f"exp(-({a.signals[0]}/{_num(v)})**2)*tanh({a.signals[0]}/{_num(v / 30)})",), _stribeck_params,
-    grid_fractions=(3e-3, 1e-2, 3e-2, 0.1, 0.3), plausible=lambda p: not p["Fs"] <= 0.0))
+    grid_fractions=(3e-3, 1e-2, 3e-2, 0.1, 0.3), plausible=lambda p: not p["Fs"] <= 0.0,
+    span=rb.stribeck_span, make_grid=rb.stribeck_grid))
 register_effect(Effect(
     "backlash", "backlash: a dead band in the coupling between two positions (no force inside the gap)",
     "pair", "half_width", "twist",
@@ -435,10 +560,11 @@ register_effect(Effect(
 register_effect(Effect(
     "cogging", "cogging: a torque periodic in an angle (n periods per radian)", "position", "periods", "periods",
     lambda a, v: (f"sin({_num(v)}*{a.signals[0]})", f"cos({_num(v)}*{a.signals[0]})"), _periodic_params("periods"),
-    grid_fractions=tuple(float(n) for n in range(2, 65)), integer=True))
+    integer=True, span=rb.periodic_span, make_grid=rb.periodic_grid))
 register_effect(Effect(
     "gravity", "gravity: a torque proportional to the sine of an angle (an unbalanced load)", "position", None, "",
-    lambda a, v: (f"sin({a.signals[0]})", f"cos({a.signals[0]})"), _periodic_params("periods")))
+    lambda a, v: (f"sin({a.signals[0]})", f"cos({a.signals[0]})"), _periodic_params("periods"),
+    span=lambda p, band, _: (0.0, math.inf) if rb.gravity_usable(p, band) else None))
 register_effect(Effect(
     "offset", "a constant force or torque (offset, unbalance, amplifier bias)", "none", None, "",
     lambda a, v: ("1",), _offset_params))
@@ -446,7 +572,8 @@ register_effect(Effect(
     "delay", "a time delay on an input (transport, computation)", "input", "delay", "samples",
     lambda a, v: (delayed_name(a.signals[0], int(round(v))),), _delay_params,
     make_fit_terms=lambda a, v: tuple(delayed_name(a.signals[0], int(round(v)) + k) for k in (0, 1)),
-    grid_fractions=_DELAYS, integer=True, plausible=lambda p: 0.0 < p["delay_samples"] < _DELAYS[-1]))
+    integer=True, plausible=lambda p: 0.0 < p["delay_samples"] < rb.DELAY_MAX,
+    span=lambda u, band, _: rb.delay_span(band), make_grid=lambda lo, hi, _: rb.delay_grid(lo, hi)))
 register_effect(Effect(
-    "cubic_stiffness", "a hardening or softening spring: a force cubic in the twist between two positions",
-    "pair", None, "", lambda a, v: (f"({a.signals[0]}-{a.signals[1]})**3",), _cubic_params))
+    "cubic_stiffness", "a hardening or softening spring: a force cubic in a position (to ground, Duffing) or in "
+    "the twist between two positions", "position_or_pair", None, "", _cubic_terms, _cubic_params))

@@ -1,0 +1,238 @@
+"""What a record can show: its sample time, length, noise levels and the nuisance ranges the data make identifiable.
+
+An effect's nuisance grid comes from the physics of the record, not from fixed numbers
+(:meth:`cosim.diagnose.effects.Effect.grid`). Each rule below gives the range ``(lo, hi)`` in which the nuisance
+can be told from the data (None: the effect cannot be identified at that place) and the grid over it:
+
+* **periodic in a position** (cogging, ``n`` periods per radian on ``p``): the torque's frequency at the typical
+  speed, ``n |v|_90 / (2 pi)``, stays below ``0.8`` of the Nyquist frequency and below :data:`RESONANCE_FACTOR`
+  times the model's fastest resonance, if it has one (:func:`visible_band`), and the position's range holds at
+  least two periods (``n ptp(p) / (2 pi) >= 2``). The grid is uniform, at the record's resolution in ``n``
+  (``pi / ptp(p)``: two neighbours stay 90 % correlated along the range), at most :data:`PERIODIC_POINTS`
+  values. Gravity (one period per ``2 pi``) needs the angle to turn through :data:`GRAVITY_MIN_RANGE`;
+* **Stribeck velocity** ``vs``: between :data:`STRIBECK_NOISE` noise levels of the velocity (and the speed step
+  per sample at a reversal) and a third of the largest speed, keeping only values where at least
+  :data:`MIN_SHARE` of the samples move slower than ``2 vs`` and as many faster;
+* **Coulomb smoothing velocity**: from a tenth of the speed step per sample at a reversal (a smaller one is a
+  sign function on the sample grid) to a few noise levels of the velocity, within ``[1e-4, 0.1]`` of the
+  largest speed;
+* **delay**: whole samples from 1 to :data:`DELAY_SHARE` of the record (at most :data:`DELAY_MAX`), spaced by
+  about 25 %.
+
+:class:`RecordBand` holds what the rules read besides the signals (built by the ranking from the screen: the
+free run's columns, ``screen.dt``, ``screen.sigma``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: Share of the Nyquist frequency a periodic effect's frequency may reach at the typical speed.
+NYQUIST_SHARE = 0.8
+#: A periodic effect's frequency stays below this many times the model's fastest resonance.
+RESONANCE_FACTOR = 10.0
+#: Least periods of a periodic effect over the position's range.
+MIN_PERIODS = 2.0
+#: Percentile of the speed that stands for the typical speed.
+SPEED_PERCENTILE = 90.0
+#: Most values of a periodic effect's grid (the lowest periods at the record's resolution).
+PERIODIC_POINTS = 64
+#: Least range of an angle (rad) for gravity (one period per 2 pi): below it sin and cos are a line and a constant.
+GRAVITY_MIN_RANGE = 0.5
+#: The Stribeck velocity's least value, in noise levels of the measured velocity.
+STRIBECK_NOISE = 2.0
+#: Least share of the samples on each side of twice the Stribeck velocity.
+MIN_SHARE = 0.05
+#: Longest delay, as a share of the record's samples, and in samples.
+DELAY_SHARE = 0.02
+DELAY_MAX = 200
+#: Ratio between neighbouring values of a logarithmic grid.
+LOG_STEP = 10 ** 0.5
+
+
+@dataclass(frozen=True)
+class RecordBand:
+    """What the nuisance rules read besides the signals.
+
+    Attributes
+    ----------
+    dt : float or None
+        Sample time (None: no Nyquist limit).
+    samples : int
+        Samples in the record.
+    noise : dict
+        Noise level (standard deviation) of each measured state, where known.
+    ranges : dict
+        Peak-to-peak range of each signal.
+    visible : dict
+        Per position, the highest frequency (Hz) a periodic effect on it may have besides the Nyquist band
+        (:func:`visible_band`; a position not named has no such limit).
+    """
+
+    dt: float | None
+    samples: int
+    noise: Mapping[str, float] = field(default_factory=dict)
+    ranges: Mapping[str, float] = field(default_factory=dict)
+    visible: Mapping[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, columns: Mapping[str, np.ndarray], dt: float | None = None,
+           noise: Mapping[str, float] | None = None, model: Any = None) -> RecordBand:
+        """The band of a record (`columns`, sampled at `dt`) with its states' `noise` levels; `model` (an
+        :class:`~cosim.identify.model.IdentifiedModel`) gives each position's visible band."""
+        arrays = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+        samples = max((a.size for a in arrays.values()), default=0)
+        ranges = {k: float(np.ptp(a)) if a.size else 0.0 for k, a in arrays.items()}
+        visible = visible_band(model, arrays, dict(noise or {}), dt) if model is not None else {}
+        return cls(dt=float(dt) if dt else None, samples=int(samples), noise=dict(noise or {}), ranges=ranges,
+                   visible=visible)
+
+    @property
+    def duration(self) -> float | None:
+        return (self.samples - 1) * self.dt if self.dt else None
+
+    @property
+    def nyquist(self) -> float:
+        """The Nyquist frequency in Hz (inf without a sample time)."""
+        return 0.5 / self.dt if self.dt else math.inf
+
+
+def visible_band(model: Any, columns: Mapping[str, np.ndarray], noise: Mapping[str, float],
+                 dt: float | None) -> dict[str, float]:
+    """Per position of `model`, :data:`RESONANCE_FACTOR` times the model's fastest resonance (the largest
+    eigenvalue of its linear part with an imaginary part, in Hz): far above it the plant filters a ripple by
+    more than 40 dB, and what a periodic term fits there is a function of the position near its reversals, not
+    a ripple. Empty when the model has no resonance (a mass with friction): then only the Nyquist band limits.
+    (`columns`, `noise` and `dt` are for rules that read the record.)"""
+    states, terms = list(model.states), list(model.terms)
+    a = np.zeros((len(states), len(states)))
+    for j, name in enumerate(states):
+        if name in terms:
+            a[:, j] = np.asarray(model.coef, dtype=float)[:, terms.index(name)]
+    if not a.size or not np.all(np.isfinite(a)):
+        return {}
+    eig = np.linalg.eigvals(a)
+    modes = np.abs(eig[np.abs(eig.imag) > 1e-9 * np.maximum(np.abs(eig), 1e-300)])
+    if not modes.size:
+        return {}
+    top = RESONANCE_FACTOR * float(modes.max()) / (2 * math.pi)
+    velocity_of = {p: v for p in states for v in states if p != v and _is_kinematic(model, p, v)}
+    return dict.fromkeys(velocity_of, top)
+
+
+def _is_kinematic(model: Any, p: str, v: str) -> bool:
+    row = np.asarray(model.coef, dtype=float)[list(model.states).index(p)]
+    terms = list(model.terms)
+    return v in terms and row[terms.index(v)] == 1.0 and np.count_nonzero(row) == 1
+
+
+# ---------------------------------------------------------------------------------------------- signal figures
+def speed_of(position: np.ndarray, band: RecordBand) -> np.ndarray:
+    """The position's speed (by central differences; per sample without a sample time)."""
+    p = np.asarray(position, dtype=float)
+    return np.abs(np.gradient(p, band.dt or 1.0)) if p.size > 1 else np.zeros(p.size)
+
+
+def typical_speed(speed: np.ndarray) -> float:
+    return float(np.percentile(np.abs(speed), SPEED_PERCENTILE)) if np.size(speed) else 0.0
+
+
+def reversal_step(velocity: np.ndarray) -> float:
+    """Median change of the velocity over the sample in which it changes sign (nan without a reversal): the
+    finest speed scale the sampled record shows near zero speed."""
+    v = np.asarray(velocity, dtype=float)
+    sign = np.sign(v)
+    at = np.nonzero(sign[1:] * sign[:-1] < 0)[0]
+    return float(np.median(np.abs(np.diff(v)[at]))) if at.size else math.nan
+
+
+def log_grid(lo: float, hi: float, step: float = LOG_STEP) -> list[float]:
+    """Values from `lo` to `hi` spaced by about `step` (both ends included)."""
+    if not (0.0 < lo <= hi) or not math.isfinite(hi):
+        return []
+    if hi / lo < 1.0 + 1e-9:
+        return [float(lo)]
+    count = max(2, math.ceil(math.log(hi / lo) / math.log(step)) + 1)
+    return [float(v) for v in np.geomspace(lo, hi, count)]
+
+
+# ---------------------------------------------------------------------------------------------- the rules
+def periodic_span(position: np.ndarray, band: RecordBand, name: str = "") -> tuple[float, float] | None:
+    """Periods per unit of position that the record can show (see the module notes), or None."""
+    p = np.asarray(position, dtype=float)
+    extent = float(np.ptp(p)) if p.size else 0.0
+    if not extent > 0.0:
+        return None
+    lo = max(1.0, math.ceil(MIN_PERIODS * 2 * math.pi / extent - 1e-9))
+    speed = typical_speed(speed_of(p, band))
+    top = min(NYQUIST_SHARE * band.nyquist, band.visible.get(name, math.inf))
+    hi = math.floor(top * 2 * math.pi / speed) if speed > 0 and math.isfinite(top) else math.inf
+    return (float(lo), float(hi)) if lo <= hi else None
+
+
+def periodic_grid(lo: float, hi: float, position: np.ndarray) -> list[float]:
+    """Whole periods from `lo`, at the record's resolution in periods, at most :data:`PERIODIC_POINTS` values."""
+    extent = float(np.ptp(np.asarray(position, dtype=float)))
+    step = max(1, int(math.pi / extent)) if extent > 0 else 1
+    out, n = [], lo
+    while n <= hi and len(out) < PERIODIC_POINTS:
+        out.append(float(n))
+        n += step
+    return out
+
+
+def gravity_usable(position: np.ndarray, band: RecordBand) -> bool:
+    """An angle that turns far enough for sin and cos to differ from a line and a constant, slowly enough to be
+    sampled."""
+    p = np.asarray(position, dtype=float)
+    if not (p.size and float(np.ptp(p)) >= GRAVITY_MIN_RANGE):
+        return False
+    speed = typical_speed(speed_of(p, band))
+    return speed / (2 * math.pi) < NYQUIST_SHARE * band.nyquist
+
+
+def stribeck_span(velocity: np.ndarray, band: RecordBand, name: str) -> tuple[float, float] | None:
+    v = np.abs(np.asarray(velocity, dtype=float))
+    vmax = float(v.max()) if v.size else 0.0
+    if not vmax > 0.0:
+        return None
+    step = reversal_step(velocity)
+    lo = max(STRIBECK_NOISE * float(band.noise.get(name, 0.0)), step if math.isfinite(step) else 0.0, 3e-3 * vmax)
+    hi = vmax / 3.0
+    return (lo, hi) if lo <= hi else None
+
+
+def stribeck_grid(lo: float, hi: float, velocity: np.ndarray) -> list[float]:
+    """The log grid over the span, less the values with too few samples below or above twice the value."""
+    v = np.abs(np.asarray(velocity, dtype=float))
+    return [vs for vs in log_grid(lo, hi) if MIN_SHARE <= float(np.mean(v < 2 * vs)) <= 1.0 - MIN_SHARE]
+
+
+def smoothing_span(velocity: np.ndarray, band: RecordBand, name: str) -> tuple[float, float] | None:
+    v = np.asarray(velocity, dtype=float)
+    vmax = float(np.abs(v).max()) if v.size else 0.0
+    if not vmax > 0.0:
+        return None
+    step = reversal_step(v)
+    lo = max(1e-4 * vmax, step / 10.0 if math.isfinite(step) else 0.0)
+    hi = min(0.1 * vmax, max(0.03 * vmax, 3.0 * float(band.noise.get(name, 0.0))))
+    return (lo, max(hi, lo))
+
+
+def delay_span(band: RecordBand) -> tuple[float, float] | None:
+    top = min(DELAY_MAX, math.floor(DELAY_SHARE * band.samples))
+    return (1.0, float(top)) if top >= 1 else None
+
+
+def delay_grid(lo: float, hi: float) -> list[float]:
+    """Whole samples from `lo` to `hi`, every one up to 6, then about 25 % apart."""
+    out, d = [], int(lo)
+    while d <= hi:
+        out.append(float(d))
+        d = max(d + 1, round(d * 1.25))
+    return out

@@ -1,0 +1,234 @@
+"""The effect catalogue: nuisance grids from the physics of the record, effect selections with fixed values,
+standard errors of every effect's parameter, and the cubic spring on one position (a Duffing oscillator).
+
+The records are built here: synthetic signals with known ranges for the grid rules, and a Duffing oscillator
+``m x'' + c x' + k x + k3 x^3 = u`` integrated with scipy's ``solve_ivp`` (input held over each sample) for the
+end-to-end case.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from cosim.data.trajectory import Trajectory
+from cosim.diagnose import _record_band as rb
+from cosim.diagnose._ranking import check_effect_selection
+from cosim.diagnose.candidates import _uncertainty
+from cosim.diagnose.effects import EFFECTS, Attachment, RecordBand, Roles, effect_names, effect_selection
+from cosim.errors import InvalidSettingError, UnknownVariableError
+from cosim.identify.model import IdentifiedModel
+
+DT = 1e-3
+
+
+def slew(extent: float, speed: float, n: int = 4000) -> np.ndarray:
+    """A position ramping through `extent` at `speed` (units per s), sampled at DT."""
+    return np.minimum(np.arange(n) * DT * speed, extent)
+
+
+def attachment(name: str) -> Attachment:
+    return Attachment(name, (name,), ("v",))
+
+
+# ---------------------------------------------------------------------------------------------- grids and bounds
+def test_cogging_grid_is_bounded_by_the_nyquist_band_and_two_periods_of_travel():
+    p = slew(3.0, 2.0)  # 3 rad at 2 rad/s, 1 kHz: Nyquist 500 Hz
+    band = RecordBand.of({"p": p}, DT)
+    lo, hi = EFFECTS["cogging"].nuisance_span(attachment("p"), {"p": p}, band)
+    assert lo == math.ceil(2 * 2 * math.pi / 3.0)  # two periods over the 3 rad of travel: n >= 4.19
+    assert hi == math.floor(0.8 * 500 * 2 * math.pi / 2.0)  # n * 2 rad/s / (2 pi) below 400 Hz
+    grid = EFFECTS["cogging"].grid(attachment("p"), {"p": p}, band)
+    assert grid[0] == lo and np.all(np.diff(grid) == 1.0)  # the travel resolves every whole period
+    assert len(grid) == rb.PERIODIC_POINTS
+    # the same motion sampled ten times faster: the band's top moves with the sampling
+    fast = np.minimum(np.arange(40000) * DT / 10 * 2.0, 3.0)
+    span = EFFECTS["cogging"].nuisance_span(attachment("p"), {"p": fast}, RecordBand.of({"p": fast}, DT / 10))
+    assert span == (lo, pytest.approx(10 * hi, abs=10))
+
+
+def test_cogging_grid_on_a_short_travel_starts_high_and_steps_at_its_resolution():
+    p = 0.02 * np.sin(2 * np.pi * np.arange(4000) * DT)  # +-0.02 rad: two periods need n >= 315
+    grid = EFFECTS["cogging"].grid(attachment("p"), {"p": p}, RecordBand.of({"p": p}, DT))
+    assert grid[0] == math.ceil(4 * math.pi / np.ptp(p))
+    assert np.diff(grid)[0] == int(math.pi / np.ptp(p))
+
+
+def test_cogging_is_not_tried_where_the_record_cannot_show_it():
+    # +-0.25 rad at 30 Hz (up to 47 rad/s) sampled at 100 Hz: two periods need n >= 26, Nyquist allows n <= 6
+    p = 0.25 * np.sin(2 * np.pi * 30.0 * np.arange(400) * 0.01 + 0.3)
+    band = RecordBand.of({"p": p}, 0.01)
+    assert EFFECTS["cogging"].grid(attachment("p"), {"p": p}, band) == []
+
+
+def test_gravity_needs_the_angle_to_turn():
+    band = RecordBand.of({}, DT)
+    assert EFFECTS["gravity"].grid(attachment("p"), {"p": slew(0.3, 1.0)}, band) == []
+    assert EFFECTS["gravity"].grid(attachment("p"), {"p": slew(2.0, 1.0)}, band) == [None]
+
+
+def test_stribeck_grid_lies_between_the_noise_and_a_third_of_the_speed():
+    t = np.arange(6000) * DT
+    v = 0.3 * np.sin(2 * np.pi * 1.0 * t)
+    band = RecordBand.of({"v": v}, DT, {"v": 0.005})
+    grid = EFFECTS["stribeck"].grid(attachment("v"), {"v": v}, band)
+    assert grid and min(grid) >= 2 * 0.005 - 1e-12 and max(grid) <= 0.1 + 1e-12
+    # a record that hardly ever moves slowly cannot show a small Stribeck velocity
+    always_fast = np.sign(np.sin(2 * np.pi * 0.5 * t)) * (1.0 + 0.2 * np.sin(2 * np.pi * 3 * t))
+    grid = EFFECTS["stribeck"].grid(attachment("v"), {"v": always_fast}, RecordBand.of({"v": always_fast}, DT))
+    assert all(np.mean(np.abs(always_fast) < 2 * vs) >= rb.MIN_SHARE for vs in grid)
+    assert not grid or min(grid) > 0.3
+
+
+def test_coulomb_smoothing_grid_follows_the_speed_range():
+    v = 0.3 * np.sin(2 * np.pi * np.arange(6000) * DT)
+    for scale in (1.0, 100.0):
+        grid = EFFECTS["coulomb_friction"].grid(attachment("v"), {"v": scale * v},
+                                                RecordBand.of({"v": scale * v}, DT))
+        assert 1e-4 * 0.3 * scale <= min(grid) and max(grid) <= 0.1 * 0.3 * scale + 1e-12
+        assert len(grid) >= 3 and np.all(np.diff(np.log(grid)) > 0)
+
+
+@pytest.mark.parametrize(("samples", "longest"), [(300, 6), (4000, 75), (10**6, 185)])
+def test_delay_grid_is_bounded_by_the_record(samples, longest):
+    u = np.sin(np.arange(samples) * DT * 7.0)
+    grid = EFFECTS["delay"].grid(Attachment("u", ("u",), ("v",)), {"u": u}, RecordBand.of({"u": u}, DT))
+    assert grid[:6] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert max(grid) == longest and max(grid) <= max(rb.DELAY_SHARE * samples, 1)
+
+
+def test_cubic_stiffness_attaches_to_each_position_and_each_coupled_pair():
+    model = IdentifiedModel(states=("a", "va", "b", "vb"), inputs=("u",), terms=("va", "a", "b", "vb", "u"),
+                            coef=np.array([[1.0, 0, 0, 0, 0], [-1.0, -100.0, 100.0, 0, 2.0],
+                                           [0, 0, 0, 1.0, 0], [0, 50.0, -50.0, -1.0, 0]]))
+    roles = Roles.of(model)
+    places = {a.label: EFFECTS["cubic_stiffness"].terms(a, None) for a in EFFECTS["cubic_stiffness"].attachments(roles)}
+    assert places == {"a": ("a**3",), "b": ("b**3",), "a-b": ("(a-b)**3",)}
+
+
+# ---------------------------------------------------------------------------------------------- selections
+def test_selection_text():
+    assert effect_selection("all").names == tuple(EFFECTS)
+    sel = effect_selection("coulomb_friction, cogging")
+    assert sel.names == ("coulomb_friction", "cogging") and not sel.fixed
+    sel = effect_selection("cogging:periods=120")
+    assert sel.names == ("cogging",) and sel.fixed == {"cogging": 120.0}
+    assert effect_selection("all,cogging:periods=12").fixed == {"cogging": 12.0}
+    assert effect_selection(["offset", "delay:delay=3"]).specs == ("offset", "delay:delay=3")
+    assert effect_names("coulomb_friction,cogging:periods=120") == ["coulomb_friction", "cogging:periods=120"]
+    assert effect_selection(effect_names("all,cogging:periods=12")) == effect_selection("all,cogging:periods=12")
+
+
+@pytest.mark.parametrize(("text", "error", "fragment"), [
+    ("frction", UnknownVariableError, "no effect named 'frction'"),
+    ("cogging:period=12", InvalidSettingError, "write cogging:periods=VALUE"),
+    ("cogging:periods=-3", InvalidSettingError, "must be positive"),
+    ("cogging:periods=12.5", InvalidSettingError, "whole periods"),
+    ("cogging:periods=abc", InvalidSettingError, "must be a number"),
+    ("offset:level=1", InvalidSettingError, "has no nuisance parameter"),
+])
+def test_bad_selection_is_one_line(text, error, fragment):
+    with pytest.raises(error, match=fragment) as info:
+        effect_selection(text)
+    assert "\n" not in str(info.value)
+
+
+def test_a_fixed_period_outside_the_records_band_is_refused_up_front():
+    model = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u"), coef=np.array([[1.0, 0], [-1, 1]]))
+    n = 4000
+    x = slew(3.0, 2.0, n)
+    columns = {"x": x, "v": np.gradient(x, DT), "u": np.sin(np.arange(n) * DT)}
+    fine = {"x": 1e-9, "v": 1e-9}  # precise sensors: the Nyquist band is the limit
+    assert check_effect_selection("cogging:periods=120", model, columns, DT, fine).fixed == {"cogging": 120.0}
+    with pytest.raises(InvalidSettingError, match=r"cogging:periods=5000 is outside what these data can show "
+                                                  r"\(on x periods 5 to 1256") as info:
+        check_effect_selection("coulomb_friction,cogging:periods=5000", model, columns, DT, fine)
+    assert "\n" not in str(info.value) and "1000 Hz sampling" in str(info.value)
+    with pytest.raises(InvalidSettingError, match="outside"):
+        check_effect_selection("cogging:periods=2", model, columns, DT, fine)  # under two periods over 3 rad
+    # a spring of 100 (x'' = u - v - 100 x, a resonance at 10 rad/s = 1.59 Hz): a ripple at most ten times
+    # faster, 15.9 Hz at 2 rad/s, is n <= 15.9 * 2 pi / 2 = 50
+    spring = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),
+                             coef=np.array([[1.0, 0, 0], [-1, -100, 1]]))
+    with pytest.raises(InvalidSettingError, match=r"on x periods 5 to 49 "):
+        check_effect_selection("cogging:periods=120", spring, columns, DT, fine)
+
+
+# ---------------------------------------------------------------------------------------------- standard errors
+#: Each effect's main physical parameter, by the name its parameters give it (rows: "va", "vb").
+MAIN = {"coulomb_friction": "Fc", "viscous_asymmetry": "viscous_asymmetry", "stribeck": "Fs",
+        "backlash": "half_width", "deadzone": "gain_ratio", "saturation": "gain_ratio", "cogging": "amplitude_va",
+        "gravity": "amplitude_va", "offset": "offset_va", "delay": "delay_samples", "cubic_stiffness": "k3"}
+
+
+def test_every_effect_names_its_main_parameter():
+    assert set(MAIN) == set(EFFECTS)
+
+
+@pytest.mark.parametrize("name", sorted(MAIN))
+def test_every_effects_main_parameter_has_a_standard_error(name):
+    """Delta-method standard errors from the coefficients' covariance, against the first-order answer."""
+    model = IdentifiedModel(states=("a", "va", "b", "vb"), inputs=("u",), terms=("va", "a", "b", "vb", "u"),
+                            coef=np.array([[1.0, 0, 0, 0, 0], [-1.0, -100.0, 100.0, 0, 2.0],
+                                           [0, 0, 0, 1.0, 0], [0, 50.0, -50.0, -1.0, 0]]))
+    roles = Roles.of(model)
+    effect = EFFECTS[name]
+    place = next(a for a in effect.attachments(roles) if "va" in a.rows or a.rows)
+    place = Attachment(place.label, place.signals, ("va",))
+    q = len(effect.terms(place, 3.0 if effect.nuisance else None))
+    if name == "delay":
+        q = 2
+    coef = {"va": np.linspace(-3.0, -2.0, q) if name != "backlash" else np.array([80.0])}
+    rel = 0.01
+    cov = np.diag((rel * coef["va"]) ** 2)
+    value = 3.0 if effect.nuisance else None
+    params = effect.parameters(coef, value, roles, place)
+    se = _uncertainty(effect, coef, cov, value, roles, place)
+    key = MAIN[name]
+    assert math.isfinite(params[key]) and se.get(key, 0.0) > 0.0, (params, se)
+    if name in ("coulomb_friction", "viscous_asymmetry", "stribeck", "offset", "cubic_stiffness"):
+        # a force: the coefficient over the row's gain (2), so its relative error is the coefficient's
+        assert abs(params[key]) == pytest.approx(abs(coef["va"][0]) / 2.0)
+        assert se[key] == pytest.approx(rel * abs(params[key]), rel=1e-3)
+
+
+# ---------------------------------------------------------------------------------------------- Duffing
+M, C, K, K3 = 2.0, 4.0, 200.0, 2000.0
+
+
+def duffing(seed: int = 0, n: int = 4000, dt: float = 2e-3, noise: float = 0.01) -> Trajectory:
+    """m x'' + c x' + k x + k3 x^3 = u, a 0.2-4 Hz multisine held over each sample, noise on x and v."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n + 1) * dt
+    freqs, phases = np.linspace(0.2, 4.0, 12), rng.uniform(0, 2 * np.pi, 12)
+    u = 12.0 * sum(np.sin(2 * np.pi * f * t + p) for f, p in zip(freqs, phases, strict=True)) / np.sqrt(6)
+
+    def rhs(time, s):
+        k = min(int(time / dt + 1e-9), n)
+        return [s[1], (u[k] - C * s[1] - K * s[0] - K3 * s[0] ** 3) / M]
+
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], t_eval=t, rtol=1e-8, atol=1e-10)
+    x, v = sol.y
+    x = x + noise * x.std() * rng.standard_normal(x.size)
+    v = v + noise * v.std() * rng.standard_normal(v.size)
+    return Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, roles={"x": "state", "v": "state", "u": "input"})
+
+
+@pytest.mark.slow
+def test_duffing_oscillator_gets_a_cubic_spring_on_its_position():
+    from cosim.diagnose.diagnosis import diagnose
+
+    data = duffing()
+    linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),
+                             coef=np.array([[1.0, 0.0, 0.0], [-C / M, -K / M, 1.0 / M]]))
+    report = diagnose(linear, data, max_effects=1)
+    assert report.effects, report.message
+    found = report.effects[0]
+    assert (found.name, found.attached_to, found.rows) == ("cubic_stiffness", "x", ("v",)), report.message
+    assert found.terms == ("x**3",)
+    assert found.parameters["k3"] == pytest.approx(K3, rel=0.10)
+    assert 0.0 < found.uncertainty["k3"] < 0.05 * K3
+    assert report.after["nrmse_pct"] * 10 < report.before["nrmse_pct"]
