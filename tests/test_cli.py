@@ -82,7 +82,7 @@ def test_failed_run_writes_no_file(tmp_path):
 def test_real_command_exits_nonzero_without_traceback():
     proc = subprocess.run([sys.executable, "-m", "cosim.cli", "simulate", "nowhere.fmu", "--duration", "1",
                            "--dt", "0.1"], capture_output=True, text=True)
-    assert proc.returncode == 1
+    assert proc.returncode == 2
     assert proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr
 
 

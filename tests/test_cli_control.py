@@ -78,7 +78,7 @@ def test_validate_exits_nonzero_with_reasons_when_a_spec_fails(mpc_file):
 ])
 def test_validate_bad_input_is_one_line(pid_file, args, message):
     result = CliRunner().invoke(main, ["validate", "bundled", str(pid_file), *args])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and message in lines[0]
     assert "Traceback" not in result.output
@@ -86,10 +86,10 @@ def test_validate_bad_input_is_one_line(pid_file, args, message):
 
 def test_design_errors_are_one_line(model_file, tmp_path):
     result = CliRunner().invoke(main, ["design", "pid", str(model_file), "--output", "theta_X"])
-    assert result.exit_code == 1 and "theta_X" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 2 and "theta_X" in result.output and "Traceback" not in result.output
     result = CliRunner().invoke(main, ["design", "mpc", str(tmp_path / "none.json")])
-    assert result.exit_code == 1 and "not found" in result.output
+    assert result.exit_code == 2 and "not found" in result.output
     bad = tmp_path / "ctrl.json"
     bad.write_text("{}")
     result = CliRunner().invoke(main, ["validate", "bundled", str(bad)])
-    assert result.exit_code == 1 and "not a cosim controller" in result.output
+    assert result.exit_code == 2 and "not a cosim controller" in result.output

@@ -1,6 +1,7 @@
 """What every ``cosim`` command shares: one-line errors, text or JSON output, and readers of option values.
 
-* :func:`_friendly` - a command's library errors become one ``error: ...`` line on stderr and an exit status;
+* :func:`_friendly` - a command's library errors become one ``error: ...`` line on stderr and an exit status
+  (:data:`EXIT_RESULT`, :data:`EXIT_INPUT`, :data:`EXIT_INTERNAL`);
 * :func:`_emit` - the result as text, or as one JSON object with ``--json``;
 * :func:`_pairs`, :func:`_names`, :func:`_ranges` - ``NAME=VALUE``, ``A,B,...`` and ``NAME=LOW:HIGH`` options;
 * :func:`_resolve_fmu` - an FMU argument: a path, or ``bundled`` / ``bundled3`` for the bundled servo.
@@ -21,6 +22,14 @@ import click
 from ..errors import CosimError, InvalidSettingError
 from ..numbers import parse_number
 
+#: Exit status when the result does not meet what was asked (a failed spec, an unstable model): errors whose
+#: class sets ``exit_status = 1``.
+EXIT_RESULT = 1
+#: Exit status for bad input or usage (every other :class:`~cosim.errors.CosimError`; click's usage errors too).
+EXIT_INPUT = 2
+#: Exit status for a bug of ours (an unexpected exception), after sysexits.h's EX_SOFTWARE.
+EXIT_INTERNAL = 70
+
 
 def _emit(as_json: bool, payload: dict[str, Any], text: str) -> None:
     """Print `payload` as one JSON object with ``--json``, else `text`."""
@@ -31,7 +40,9 @@ def _emit(as_json: bool, payload: dict[str, Any], text: str) -> None:
 
 
 def _friendly(func: Callable) -> Callable:
-    """Turn library errors into one line on stderr and exit status 1 (2 for internal errors)."""
+    """Turn library errors into one line on stderr and an exit status: :data:`EXIT_INPUT` for bad input, the
+    error's own ``exit_status`` where it has one (:data:`EXIT_RESULT`: an unstable model), :data:`EXIT_INTERNAL`
+    for a bug of ours."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -41,7 +52,7 @@ def _friendly(func: Callable) -> Callable:
             if os.environ.get("COSIM_DEBUG"):
                 raise
             click.echo(f"error: {exc}", err=True)
-            sys.exit(1)
+            sys.exit(int(getattr(exc, "exit_status", EXIT_INPUT)))
         except KeyboardInterrupt:
             click.echo("error: interrupted", err=True)
             sys.exit(130)
@@ -50,7 +61,7 @@ def _friendly(func: Callable) -> Callable:
                 raise
             click.echo(f"error: internal error {type(exc).__name__}: {exc} (set COSIM_DEBUG=1 for the "
                        "traceback and report it)", err=True)
-            sys.exit(2)
+            sys.exit(EXIT_INTERNAL)
 
     return wrapper
 
