@@ -81,7 +81,7 @@ def test_cli_the_remedies_the_errors_name_work(files):
 
 
 @pytest.mark.parametrize(("case", "error", "fragment"), [
-    ("short", DataError, "diagnosis needs at least 200 samples, got 100"),
+    ("short", DataError, "diagnosis needs at least 200 samples per record, the data have 100"),
     ("constant", DataError, "input 'u' is constant"),
     ("nan", DataError, r"'x' is nan at t=0.3 s \(row 300\)"),
     ("gap", DataError, "not uniform.*pass resample=True"),

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..errors import DataError
+from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
 from ._command import _emit, _friendly, _names, _pairs
 
@@ -18,7 +18,7 @@ DIAGNOSE_MIN_SAMPLES = 200
 
 
 @click.command("diagnose")
-@click.argument("data_path", metavar="DATA")
+@click.argument("data_paths", metavar="DATA...", nargs=-1, required=True)
 @click.option("--state", "states", required=True, metavar="A,B,...",
               help="State columns, in order (derived velocities by their name, e.g. qm,qm_dot).")
 @click.option("--input", "inputs", required=True, metavar="U,...",
@@ -28,10 +28,13 @@ DIAGNOSE_MIN_SAMPLES = 200
 @click.option("--effects", default="all", show_default=True, metavar="all|NAME,...",
               help="Which catalogued effects to try.")
 @click.option("--derive", default=None, metavar="POS,...",
-              help="Derive velocities <POS>_dot from measured positions (Savitzky-Golay).")
-@click.option("--kinematics", default=None, metavar="POS=VEL,...",
-              help="Known rows d(POS)/dt = VEL for the identified model, e.g. theta_m=omega_m,theta_L=omega_L "
-                   "(derived velocities are added by themselves). Effects on velocities need them.")
+              help="Derive velocities <POS>_dot from measured positions (Savitzky-Golay, window chosen from the "
+                   "data's noise and bandwidth).")
+@click.option("--derive-window", "derive_window", default=None, type=click.IntRange(3), metavar="N",
+              help="Samples in the derivative's window (odd) instead of the one chosen from the data.")
+@click.option("--kinematics", default="auto", show_default=True, metavar="auto|none|POS=VEL,...",
+              help="Rows d(POS)/dt = VEL pinned in the identified model: found from the names and the data "
+                   "(auto), none, or given, e.g. theta_m=omega_m,theta_L=omega_L. Effects on velocities need them.")
 @click.option("--time", "time_column", default=None, help="Name of the time column (default t, else time).")
 @click.option("--resample", is_flag=True,
               help="Interpolate a record whose time steps are not uniform onto a uniform grid instead of refusing it.")
@@ -50,26 +53,29 @@ DIAGNOSE_MIN_SAMPLES = 200
 @click.option("--json", "as_json", is_flag=True,
               help='Print {"effects": [{"name", "attached_to", "parameters"}...], "before": {...}, "after": {...}}.')
 @_friendly
-def diagnose_command(data_path: str, states: str, inputs: str, model_path: str | None, effects: str,
-                     derive: str | None, kinematics: str | None, time_column: str | None, resample: bool,
+def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, model_path: str | None, effects: str,
+                     derive: str | None, derive_window: int | None, kinematics: str, time_column: str | None,
+                     resample: bool,
                      max_effects: int, initial_state: str, noise: str | None, report_path: str | None,
                      out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
 
-    DATA is a CSV, Parquet or MATLAB .mat file; columns are chosen by name.
+    DATA is a CSV, Parquet or MATLAB .mat file; columns are chosen by name. Several files are separate records
+    of one plant (the same signals, the same step), fitted together, each from its own initial state.
 
     \b
     Example:
       cosim diagnose data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --report diagnosis.html
       cosim diagnose data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --kinematics theta_m=omega_m
       cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --json
-      cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --x0 measured \\
-          --noise qm=5e-6
+      cosim diagnose run1.csv run2.csv --state x,v --input u
     """
     from ..data.datafile import load_data
-    from ..diagnose.diagnosis import diagnose
+    from ..diagnose.diagnosis import BASE_SETTINGS, diagnose
+    from ..diagnose.effects import effect_selection
     from ..identify.model import IdentifiedModel
     from ..identify.sindyc import SINDYc
+    from .identify import format_kinematics
 
     state_names, input_specs = _names(states, "--state"), _names(inputs, "--input")
     input_names = [spec.partition("=")[0].strip() for spec in input_specs]
@@ -77,33 +83,63 @@ def diagnose_command(data_path: str, states: str, inputs: str, model_path: str |
     derived_names = {f"{p}_dot" for p in derived}
     columns = [n for n in state_names if n not in derived_names] + input_specs
     roles = {**dict.fromkeys(state_names, "state"), **dict.fromkeys(input_names, "input")}
-    data = load_data(data_path, time=time_column, columns=columns, roles=roles, derive=derived, resample=resample)
-    data = data.select([*state_names, *input_names])
-    if len(data) < DIAGNOSE_MIN_SAMPLES:  # before identifying: its own minimum would name a library option
-        raise DataError(f"{Path(data_path).name} has {len(data)} samples; diagnosis needs at least "
-                        f"{DIAGNOSE_MIN_SAMPLES}; use a longer record")
+    known = _kinematics_option(kinematics, state_names)
+    records = []
+    for path in data_paths:
+        data = load_data(path, time=time_column, columns=columns, roles=roles, derive=derived, resample=resample,
+                         derive_window=derive_window)
+        data = data.select([*state_names, *input_names])
+        if len(data) < DIAGNOSE_MIN_SAMPLES:  # before identifying: its own minimum would name a library option
+            raise DataError(f"{Path(path).name} has {len(data)} samples; diagnosis needs at least "
+                            f"{DIAGNOSE_MIN_SAMPLES}; use a longer record")
+        records.append(data)
+    selection = effect_selection(effects)  # names checked now; fixed values against the data in diagnose()
+    found_rows = ""
     if model_path:
         model = IdentifiedModel.load(model_path)
     else:
-        known = {p: f"{p}_dot" for p in derived if p in state_names and f"{p}_dot" in state_names}
-        known.update(_pairs(tuple(kinematics.split(",")), "--kinematics") if kinematics else {})
-        model = SINDYc(library="linear", include_constant=True, threshold=0.0, kinematics=known or None,
-                       refine="output_error").fit(data, states=state_names, inputs=input_names).model_
+        if isinstance(known, dict):
+            known = {**{p: f"{p}_dot" for p in derived if p in state_names and f"{p}_dot" in state_names}, **known}
+        estimator = SINDYc(**{**BASE_SETTINGS, "kinematics": known}).fit(records, states=state_names,
+                                                                         inputs=input_names)
+        model, found_rows = estimator.model_, format_kinematics(estimator.kinematics_)
     levels = {name: parse_number(text, what=f"--noise {name}")
               for name, text in _pairs(tuple(noise.split(",")), "--noise").items()} if noise else None
-    report = diagnose(model, data, effects=effects, max_effects=max_effects, x0=initial_state, noise=levels)
+    report = diagnose(model, records if len(records) > 1 else records[0], effects=selection,
+                      max_effects=max_effects, x0=initial_state, noise=levels)
     payload = report.to_dict()
     if report_path:
         payload["report"] = str(report.write_report(report_path))
     if out:
         payload["model"] = str(report.model_after.save(out))
-    lines = [report.message]
+    lines = [report.message] + ([found_rows] if found_rows else [])
+    if found_rows:
+        payload["kinematics"] = found_rows.removeprefix("kinematics: ")
     for i, e in enumerate(report.effects, start=1):
         params = ", ".join(f"{k}={v:.5g}" + (f" ± {report.effects[i - 1].uncertainty[k]:.2g}"
                                               if k in report.effects[i - 1].uncertainty else "")
                            for k, v in e.parameters.items())
         lines.append(f"  {i}. {e.name} on {e.attached_to} ({', '.join(e.rows)}): {params}")
+    for c in report.rejected:
+        lines.append(f"  rejected: {c.name} on {c.attached_to}: held-out NRMSE "
+                     f"{c.explained.get('held_out_nrmse_without_pct', float('nan')):.4g} % without, "
+                     f"{c.explained.get('held_out_nrmse_with_pct', float('nan')):.4g} % with it")
+    if report.dropped_terms:
+        lines.append("  terms no longer needed: " + ", ".join(report.dropped_terms))
     lines.append(f"  before: NRMSE {report.before['nrmse_pct']:.4g} %, R2 {report.before['r2']:.6g}; "
                  f"after: NRMSE {report.after['nrmse_pct']:.4g} %, R2 {report.after['r2']:.6g}")
     lines += [f"{k}: {payload[k]}" for k in ("report", "model") if k in payload]
     _emit(as_json, payload, "\n".join(lines))
+
+
+def _kinematics_option(text: str, states: list[str]) -> str | dict[str, str]:
+    """``--kinematics``: "auto", "none" or POS=VEL pairs, each a state (checked here: a one-line error)."""
+    from .identify import parse_kinematics_option
+
+    parsed = parse_kinematics_option(text)
+    for position, velocity in (parsed.items() if isinstance(parsed, dict) else ()):
+        for name in (position, velocity):
+            if name not in states:
+                raise InvalidSettingError(f"--kinematics {position}={velocity}: {name!r} is not a state; states are "
+                                          f"{', '.join(states)}")
+    return parsed

@@ -32,20 +32,32 @@ from .screening import (
     correlation_factor,
     free_run_cost,
     free_run_residual,
+    noise_level,
     output_error_fit,
 )
 
 
 @dataclass(frozen=True)
 class _FitOptions:
-    """How every output-error fit of one diagnosis treats the initial state and the noise levels."""
+    """How every output-error fit of one diagnosis treats the initial state, the noise levels and the records
+    (`segments`: where each starts in the concatenated columns; None: one record)."""
 
     estimate_x0: bool
     noise: Mapping[str, float] | None
+    segments: list[int] | None = None
+    #: The states that are measurements (None: all); a velocity derived from a position is not.
+    measured: tuple[str, ...] | None = None
 
     @property
     def kw(self) -> dict[str, Any]:
-        return {"estimate_x0": self.estimate_x0, "noise": self.noise}
+        return {"estimate_x0": self.estimate_x0, "noise": self.noise, "segments": self.segments,
+                "measured": self.measured}
+
+
+def _fitted_x0(model: IdentifiedModel, segments: list[int] | None) -> np.ndarray:
+    """The initial state(s) an output-error fit recorded: (n,) for one record, (records, n) for several."""
+    x0 = np.asarray(model.meta["x0"], dtype=float)
+    return x0[0] if segments is None else x0
 
 
 def _with_effect(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list[str]) -> IdentifiedModel:
@@ -89,7 +101,8 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
         cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
     trial = _with_effect(current, cand, list(new_cols))
-    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma) > float(screen.residual @ screen.residual):
+    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma, segments=fit.segments, measured=fit.measured) > \
+            float(screen.residual @ screen.residual):
         # the score's one linear step overshoots (a drifting free run): start the effect from zero instead
         trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
     nuis = list(nuisances)
@@ -116,7 +129,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
     if cost1 >= cost0:
         return None
-    delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q)
+    delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
     plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
     cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
                    explained={"size": size, "plausible": plausible, "correlation_factor": factor},
@@ -125,12 +138,13 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
 
 
 def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,
-              cost0: float, cost1: float, q: int) -> tuple[float, float, float, float]:
+              cost0: float, cost1: float, q: int, fit: _FitOptions) -> tuple[float, float, float, float]:
     """What `q` more parameters bought, from cost `cost0` (the model of `screen`) to `cost1` (`fuller`): the BIC
     change, the likelihood-ratio p-value, the size (share of the data's spread) and the residual's correlation
     factor. A residual the fuller model leaves coloured holds fewer independent samples than it has
     (:func:`~cosim.diagnose.screening.correlation_factor`): both tests count samples by it."""
-    after = free_run_residual(fuller, cols, dt, fuller.meta["x0"][0], screen.sigma)
+    after = free_run_residual(fuller, cols, dt, _fitted_x0(fuller, fit.segments), screen.sigma, segments=fit.segments,
+                              measured=fit.measured)
     factor = correlation_factor(after) if after is not None else 1.0
     n_eff = screen.n_obs / factor
     delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
@@ -192,13 +206,68 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
         else:
             q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
             delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
-                                                    columns, dt, cost_reduced, cost_full, q)
+                                                    columns, dt, cost_reduced, cost_full, q, fit)
             pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
         if not pays:
             current, nuisances = reduced, rest
             accepted = accepted[:j] + accepted[j + 1:]
             owners = [k - (k > j) for k in owners if k != j]
     return current, accepted, owners, nuisances
+
+
+def _retest_base(current: IdentifiedModel, base: IdentifiedModel, columns: dict[str, np.ndarray], dt: float,
+                 nuisances: list[Nuisance], fit: _FitOptions) -> tuple[IdentifiedModel, list[Nuisance], list[str]]:
+    """Re-test the base model's terms once an effect is in: a term that no longer stands clear of zero goes.
+
+    A linear model fitted without friction lets other terms stand in for it (a spring to ground, an offset);
+    with the friction term in, they are no longer needed. Backward elimination, weakest first: a base term's
+    t-statistic (its standard error from the output-error fit, widened by the residual's correlation factor,
+    :func:`~cosim.diagnose.screening.correlation_factor`) must exceed ``sqrt(log n)``, the BIC's price of a
+    parameter; the model is refitted after each removal. Returns the model, the nuisances and the terms
+    dropped (as ``"row: term"``).
+    """
+    dropped: list[str] = []
+    present = {(i, t) for i in range(len(base.states)) for k, t in enumerate(base.terms) if base.coef[i, k] != 0.0}
+    dynamic = {current.states.index(r) for r in Roles.of(current).dynamic_rows}
+    for _ in range(len(present)):
+        se = np.asarray(current.meta["refinement"]["std_error"], dtype=float)
+        r = free_run_residual(current, columns, dt, _fitted_x0(current, fit.segments),
+                              _sigma(current, columns, fit), segments=fit.segments, measured=fit.measured)
+        if r is None:
+            break
+        factor = correlation_factor(r)
+        entries = len(r) * (len(fit.measured) if fit.measured else len(current.states))
+        limit = math.sqrt(math.log(entries / factor))
+        weakest, where = math.inf, None
+        for i, term in present:
+            if i not in dynamic or term not in current.terms:
+                continue
+            k = current.terms.index(term)
+            if current.coef[i, k] == 0.0 or not se[i, k] > 0.0:
+                continue
+            t = abs(current.coef[i, k]) / (se[i, k] * math.sqrt(factor))
+            if t < weakest:
+                weakest, where = t, (i, k)
+        if where is None or weakest >= limit:
+            break
+        coef = current.coef.copy()
+        coef[where] = 0.0
+        reduced = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=coef,
+                                  dt=current.dt, meta=current.meta)
+        try:
+            current, _, nuisances = output_error_fit(reduced, columns, dt, nuisances=nuisances, **fit.kw)
+        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+            break
+        dropped.append(f"{current.states[where[0]]}: {current.terms[where[1]]}")
+        present.discard((where[0], current.terms[where[1]]))
+    return current, nuisances, dropped
+
+
+def _sigma(model: IdentifiedModel, columns: Mapping[str, np.ndarray], fit: _FitOptions) -> np.ndarray:
+    """Each state's noise level, as every fit of the diagnosis scales its residual."""
+    noise = fit.noise or {}
+    return np.array([float(noise[s]) if s in noise else noise_level(np.asarray(columns[s]), fit.segments)
+                     for s in model.states])
 
 
 #: A row keeps an effect's terms only if one of them stands this many standard errors from zero.

@@ -55,6 +55,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -63,17 +64,23 @@ from tqdm.auto import tqdm
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..identify.model import IdentifiedModel
-from ._ranking import _round
-from ._trials import _drop_redundant, _final_parameters, _fit_with, _FitOptions
+from ._holdout import HeldOutCheck
+from ._ranking import _round, check_effect_selection
+from ._trials import _drop_redundant, _final_parameters, _fit_with, _FitOptions, _fitted_x0, _retest_base, _sigma
 from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport, _figures
 from .effects import effect_names
-from .residuals import residuals
+from .residuals import ResidualAnalysis, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit
 
 __all__ = ["diagnose"]
 
 
+#: How ``cosim diagnose`` identifies the model it diagnoses when none is given (SINDYc settings): every linear
+#: term, kinematic rows found from the names and the data, refined by output error. A slightly unstable result
+#: is accepted: a spring standing in for friction is what the diagnosis finds and removes.
+BASE_SETTINGS = {"library": "linear", "include_constant": True, "threshold": 0.0, "kinematics": "auto",
+                 "refine": "output_error", "allow_unstable": True}
 #: Default significance level of one candidate (strict: a few hundred candidates are tried).
 ALPHA = 1e-6
 #: Default least BIC decrease of a significant candidate.
@@ -84,25 +91,58 @@ MIN_SIZE = 0.005
 VERIFY_TOP = 6
 #: Gauss-Newton iterations of a trial fit (the winner is then fitted to convergence).
 TRIAL_ITERATIONS = 4
+#: How many significant trial fits of a round may be tried on held-out data, best first, before giving up.
+HELD_OUT_TRIES = 3
+#: Fewest samples of a record.
+MIN_SAMPLES = 200
 
 
 # ---------------------------------------------------------------------------------------------- the data, checked
-def _columns(model: IdentifiedModel, data: Trajectory) -> dict[str, np.ndarray]:
-    missing = [n for n in (*model.states, *model.inputs) if n not in data.names]
-    if missing:
-        from ..errors import UnknownVariableError
+def _records(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory]) -> list[Trajectory]:
+    """`diagnose`'s `data` as a list of records, checked: each holds the model's signals at one common step."""
+    records = [data] if isinstance(data, Trajectory) else list(data)
+    if not records or not all(isinstance(r, Trajectory) for r in records):
+        raise DataError("data must be a Trajectory or a non-empty list of Trajectory records")
+    for k, record in enumerate(records):
+        which = f"record {k + 1} of {len(records)}" if len(records) > 1 else "the data"
+        missing = [n for n in (*model.states, *model.inputs) if n not in record.names]
+        if missing:
+            from ..errors import UnknownVariableError
 
-        raise UnknownVariableError(f"the data have no column {missing[0]!r} that the model needs; "
-                                   f"columns are {list(data.names)}")
-    return {name: np.asarray(data[name], dtype=float) for name in data.names}
+            raise UnknownVariableError(f"{which} have no column {missing[0]!r} that the model needs; columns are "
+                                       f"{list(record.names)}; give every record the same signals")
+        if len(record) < MIN_SAMPLES:
+            raise DataError(f"diagnosis needs at least {MIN_SAMPLES} samples per record, {which} have "
+                            f"{len(record)}; use a longer record")
+        if not np.allclose(np.diff(record.time), record.dt, rtol=1e-6, atol=0.0):
+            raise DataError(f"the time step of {which} is not uniform; resample it onto a uniform grid first")
+        if not math.isclose(record.dt, records[0].dt, rel_tol=1e-6):
+            raise DataError(f"the records have different time steps ({records[0].dt:.6g} s and {record.dt:.6g} s "
+                            f"in record {k + 1}); resample them onto one step first")
+    return records
 
 
-def _initial_state(model: IdentifiedModel, data: Trajectory, x0: str | Sequence[float]) -> np.ndarray | None:
-    """The held initial state of `diagnose`'s `x0` (None: estimated)."""
+def _columns(model: IdentifiedModel, records: Sequence[Trajectory]) -> tuple[dict[str, np.ndarray], list[int]]:
+    """The records' common columns, one record after the other, and where each record starts."""
+    names = [n for n in records[0].names if all(n in r.names for r in records)]
+    columns = {name: np.concatenate([np.asarray(r[name], dtype=float) for r in records]) for name in names}
+    starts = np.cumsum([0] + [len(r) for r in records])[:-1]
+    return columns, [int(s) for s in starts]
+
+
+def _initial_state(model: IdentifiedModel, records: Sequence[Trajectory],
+                   x0: str | Sequence[float]) -> np.ndarray | None:
+    """The held initial state(s) of `diagnose`'s `x0` (None: estimated): (n,) for one record, (records, n) for
+    several."""
     if isinstance(x0, str):
         if x0 not in ("estimate", "measured"):
             raise InvalidSettingError(f'x0 must be "estimate", "measured" or {len(model.states)} values, got {x0!r}')
-        return None if x0 == "estimate" else np.array([data[name][0] for name in model.states], dtype=float)
+        if x0 == "estimate":
+            return None
+        first = np.array([[r[name][0] for name in model.states] for r in records], dtype=float)
+        return first[0] if len(records) == 1 else first
+    if len(records) > 1:
+        raise InvalidSettingError('x0 values are for one record; with several records use "estimate" or "measured"')
     values = np.asarray(x0, dtype=float).ravel()
     if values.shape != (len(model.states),) or not np.all(np.isfinite(values)):
         raise InvalidSettingError(f"x0 must hold {len(model.states)} finite values ({', '.join(model.states)}), "
@@ -123,6 +163,21 @@ def _noise(model: IdentifiedModel, noise: Mapping[str, float] | None) -> dict[st
     return {name: float(level) for name, level in noise.items()}
 
 
+def _measured(model: IdentifiedModel, records: Sequence[Trajectory],
+              noise: Mapping[str, float] | None) -> tuple[str, ...] | None:
+    """The states that are measurements: all but the velocities derived from measured positions (their
+    derivative filter's output is no measurement and would count the position's noise twice), unless a noise
+    level is given for one. None when all are measured."""
+    derived: set[str] = set()
+    for record in records:
+        info = (record.meta or {}).get("data_file", {}) if isinstance(record.meta, Mapping) else {}
+        of = (info.get("derivatives") or {}).get("of", ()) if isinstance(info, Mapping) else ()
+        derived.update(f"{p}_dot" for p in of)
+    derived -= set(noise or ())
+    measured = tuple(s for s in model.states if s not in derived)
+    return None if len(measured) == len(model.states) or not measured else measured
+
+
 def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajectory:
     """`traj` plus the derived columns (a delayed input) that it lacks."""
     extra = {k: v for k, v in columns.items() if k not in traj.names}
@@ -134,19 +189,20 @@ def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajec
 
 
 # ---------------------------------------------------------------------------------------------- the search
-def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str] = "all",
-             max_effects: int = 3, alpha: float = ALPHA, bic_margin: float = BIC_MARGIN,
-             min_size: float = MIN_SIZE, reference: Trajectory | None = None,
+def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
+             effects: str | Sequence[str] = "all", max_effects: int = 3, alpha: float = ALPHA,
+             bic_margin: float = BIC_MARGIN, min_size: float = MIN_SIZE, reference: Trajectory | None = None,
              x0: str | Sequence[float] = "estimate", noise: Mapping[str, float] | None = None,
-             progress: bool | None = None) -> DiagnosisReport:
+             held_out: bool = True, progress: bool | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
     ----------
     model : IdentifiedModel
         The model to diagnose (typically linear, from :class:`~cosim.identify.sindyc.SINDYc`).
-    data : Trajectory
-        Measured data holding the model's states and inputs, at a uniform step.
+    data : Trajectory or sequence of Trajectory
+        Measured data holding the model's states and inputs, at a uniform step; several records (separate
+        experiments on one plant, at one step) are fitted together, each from its own initial state.
     effects : "all", comma-separated names, or a list
         Which catalogued effects to try.
     max_effects : int
@@ -157,18 +213,22 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     min_size : float
         Least size of a significant effect: how much of the data's spread its free-run correction moves.
     reference : Trajectory, optional
-        Noise-free truth on the same time grid (a simulation): the before/after figures are then computed
-        against it, as the reference study does, instead of against the noisy data (whose noise is a floor).
+        Noise-free truth on the same time grid (a simulation, one record): the before/after figures are then
+        computed against it, as the reference study does, instead of against the noisy data (whose noise is a
+        floor).
     x0 : "estimate", "measured", or a sequence of float
         The free runs' initial state: estimated with the parameters in every fit (MATLAB's
-        ``InitialState='estimate'``; right for noisy states), the data's first sample, or given values. Hold
-        it (``"measured"``) when the states are measured far more precisely than the model can follow them,
-        on a long record of a drifting (integrating) plant: there an estimated initial state absorbs the
-        model's error (on EMPS it lands 3 mm from an encoder reading good to 5 um).
+        ``InitialState='estimate'``; right for noisy states), each record's first sample, or given values (one
+        record). Hold it (``"measured"``) when the states are measured far more precisely than the model can
+        follow them, on a long record of a drifting (integrating) plant.
     noise : dict, optional
         A state's noise level (the scale of its residual in every fit), e.g. a sensor's resolution, instead
         of the estimate from the data's second differences (:func:`~cosim.diagnose.screening.noise_level`), which
         is far too small on a filtered or interpolated signal.
+    held_out : bool
+        Accept an effect only if it also lowers the free-run error on data held out from its fit (two folds:
+        each half of every record fitted, the other half predicted; :mod:`~cosim.diagnose._holdout`). A
+        candidate that wins in-sample but not held out is reported in ``rejected``, with its figures.
     progress : bool or None
         A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
 
@@ -180,38 +240,44 @@ def diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequenc
     # (3x slower on 2 cores)
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
-                         min_size=min_size, reference=reference, x0=x0, noise=noise, progress=progress)
+                         min_size=min_size, reference=reference, x0=x0, noise=noise, held_out=held_out,
+                         progress=progress)
 
 
-def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequence[str], max_effects: int,
-              alpha: float, bic_margin: float, min_size: float, reference: Trajectory | None,
-              x0: str | Sequence[float], noise: Mapping[str, float] | None,
+def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *, effects: str | Sequence[str],
+              max_effects: int, alpha: float, bic_margin: float, min_size: float, reference: Trajectory | None,
+              x0: str | Sequence[float], noise: Mapping[str, float] | None, held_out: bool,
               progress: bool | None) -> DiagnosisReport:
-    names = effect_names(effects)
-    if len(data) < 200:
-        raise DataError(f"diagnosis needs at least 200 samples, got {len(data)}")
-    if not np.allclose(np.diff(data.time), data.dt, rtol=1e-6, atol=0.0):
-        raise DataError("the data's time step is not uniform; resample it onto a uniform grid first")
-    columns = _columns(model, data)
+    records = _records(model, data)
+    columns, starts = _columns(model, records)
+    names = effect_names(check_effect_selection(effects, model, columns, records[0].dt, noise))
     for name in model.inputs:
         if np.ptp(columns[name]) == 0.0:
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
-    start = _initial_state(model, data, x0)
-    fit = _FitOptions(estimate_x0=start is None, noise=_noise(model, noise))
-    res_before = residuals(model, data, x0="estimate" if start is None else start)
-    truth = reference if reference is not None else data
-    before = _figures(model, truth, res_before, start)
+    segments = starts if len(records) > 1 else None
+    start = _initial_state(model, records, x0)
+    fit = _FitOptions(estimate_x0=start is None, noise=_noise(model, noise), segments=segments,
+                      measured=_measured(model, records, noise))
+    first = records[0]
     # the base at its own output-error optimum, so that a candidate's trial fit gains only what it adds
-    current = output_error_fit(model, columns, data.dt, x0=start, **fit.kw)[0]
-    accepted, rounds, fitted, steps = [], [], [], []
+    current = output_error_fit(model, columns, first.dt, x0=start, **fit.kw)[0]
+    res_before = residuals(model, first, x0="estimate" if start is None else _first_x0(start))
+    truth = [reference] if reference is not None else records
+    before = _figures_of(model, truth, res_before, start, refitted=None)
+    sigma = dict(zip(model.states, _sigma(model, columns, fit).tolist(), strict=True))
+    check = HeldOutCheck(columns, starts, first.dt, sigma, fit.estimate_x0, fit.measured) if held_out else None
+    if check is not None and not check.possible:
+        check = None
+    accepted, rounds, fitted, steps, rejected, dropped = [], [], [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
                disable=None if progress is None else not progress)
+    dt = first.dt
     for _ in range(max_effects):
         bar.set_postfix_str("screening")
         try:
-            screen = OutputErrorScreen(current, dict(columns), data.dt, **fit.kw)
+            screen = OutputErrorScreen(current, dict(columns), dt, **fit.kw)
         except DataError:
             if not accepted:
                 raise
@@ -223,15 +289,26 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         bar.update(1)
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
-        trials = [_fit_with(current, c, columns, data.dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+        trials = [_fit_with(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                             iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
         fitted.append(tuple(t.candidate for t in trials if t is not None))
-        trials = [t for t in trials if t is not None and t.candidate.significant]
-        if not trials:
+        trials = sorted((t for t in trials if t is not None and t.candidate.significant),
+                        key=lambda t: t.candidate.delta_bic)
+        best = None
+        for trial in trials[:HELD_OUT_TRIES]:
+            trial = _fit_with(current, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin,
+                              min_size, fit) or trial  # fitted to convergence
+            if check is not None:
+                evidence = check.judge(current, trial.model, {**columns, **trial.new_columns})
+                trial.candidate = replace(trial.candidate,
+                                          explained={**trial.candidate.explained, **evidence.as_explained()})
+                if not evidence.passed:
+                    rejected.append(_final_parameters(trial.candidate, trial.model))
+                    continue
+            best = trial
             break
-        best = min(trials, key=lambda t: t.candidate.delta_bic)
-        best = _fit_with(current, best.candidate, columns, data.dt, nuisances, screen, alpha, bic_margin,
-                         min_size, fit) or best  # the winner, fitted to convergence
+        if best is None:
+            break
         accepted.append(best.candidate)
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
@@ -240,28 +317,81 @@ def _diagnose(model: IdentifiedModel, data: Trajectory, *, effects: str | Sequen
         _write_back(accepted, owners, nuisances)
         # an effect found earlier may have stood in for the one found now: keep it only if it still pays
         current, accepted, owners, nuisances = _drop_redundant(current, accepted, owners, nuisances, columns,
-                                                              data.dt, alpha, bic_margin, min_size, fit)
+                                                              dt, alpha, bic_margin, min_size, fit)
+        # and so may a term of the base model (a spring to ground standing in for friction)
+        current, nuisances, gone = _retest_base(current, model, columns, dt, nuisances, fit)
+        dropped += gone
         _write_back(accepted, owners, nuisances)
         steps.append((tuple(c.name for c in accepted), current))
     bar.close()
-    work = _with_columns(data, columns)  # the data plus the columns an effect added
+    work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
     final = current
-    final_x0 = final.meta.get("x0") if isinstance(final.meta, Mapping) else None
-    res_after = residuals(final, work, x0=final_x0[0] if final_x0 else "estimate") if accepted else res_before
-    after = _figures(final, _with_columns(truth, columns), res_after) if accepted else before
+    res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
+    after = _figures_of(final, [_with_columns(r, _record_columns(columns, starts, k, r)) for k, r in
+                                enumerate(truth)], res_after, None, refitted=final) if accepted else before
     found = tuple(_final_parameters(c, final) for c in accepted)
-    if found:
-        message = "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
-                  f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
-    elif res_before.white:
-        message = "no effect found: the residual is white, the model explains the data"
-    else:
-        message = ("no effect found: the residual is not white, but no catalogued effect explains it "
-                   "(the model lacks something the catalogue does not cover)")
+    message = _message(found, before, after, res_before, rejected)
     return DiagnosisReport(effects=found, ranking=rounds[0] if rounds else (), rounds=tuple(rounds),
                            trials=tuple(fitted), steps=tuple(steps),
                            model_before=model, model_after=final, before=before, after=after,
-                           residuals_before=res_before, residuals_after=res_after, message=message, data=work)
+                           residuals_before=res_before, residuals_after=res_after, message=message, data=work,
+                           rejected=tuple(rejected), dropped_terms=tuple(dropped))
+
+
+def _first_x0(x0: np.ndarray) -> np.ndarray:
+    """The first record's initial state of (n,) or (records, n) initial states."""
+    x0 = np.asarray(x0, dtype=float)
+    return x0 if x0.ndim == 1 else x0[0]
+
+
+def _record_columns(columns: Mapping[str, np.ndarray], starts: Sequence[int], k: int,
+                    record: Trajectory) -> dict[str, np.ndarray]:
+    """Record `k`'s part of the concatenated columns (with the columns an effect added)."""
+    a = starts[k] if k < len(starts) else 0
+    return {name: v[a:a + len(record)] for name, v in columns.items()}
+
+
+def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: ResidualAnalysis,
+                start: np.ndarray | None, refitted: IdentifiedModel | None) -> dict[str, Any]:
+    """The free-run figures of `model` on one record, or pooled over several (weighted by their lengths, each
+    from its own initial state; per record under ``per_record``)."""
+    fitted = refitted if refitted is not None else model
+    x0s = fitted.meta.get("x0") if isinstance(fitted.meta, Mapping) else None
+    held = None if start is None else np.atleast_2d(start)
+    per = []
+    for k, record in enumerate(records):
+        if held is not None:
+            x0 = held[k]
+        elif x0s and len(x0s) == len(records):
+            x0 = np.asarray(x0s[k], dtype=float)
+        else:  # the model's own initial state on the first record, each other record's first sample
+            x0 = None if k == 0 else np.array([record[s][0] for s in model.states], dtype=float)
+        per.append(_figures(model, record, res, x0))
+    if len(per) == 1:
+        return per[0]
+    weights = np.array([len(r) for r in records], dtype=float)
+    pooled: dict[str, Any] = {"white": bool(res.white), "status": "ok" if all(p["status"] == "ok" for p in per)
+                              else "diverged", "per_record": per}
+    for key in ("r2", "nrmse_pct", "max_dev_pct"):
+        values = [p[key] for p in per]
+        pooled[key] = None if any(v is None for v in values) else float(np.average(values, weights=weights))
+    pooled["per_state"] = per[0]["per_state"]
+    return pooled
+
+
+def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after: Mapping[str, Any],
+             res_before: ResidualAnalysis, rejected: Sequence[EffectCandidate]) -> str:
+    """The report's one sentence."""
+    if found:
+        return "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
+            f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
+    if rejected:
+        return ("no effect found: " + ", ".join(f"{c.name} on {c.attached_to}" for c in rejected) +
+                " lowered the error on the data it was fitted to but not on held-out data")
+    if res_before.white:
+        return "no effect found: the residual is white, the model explains the data"
+    return ("no effect found: the residual is not white, but no catalogued effect explains it "
+            "(the model lacks something the catalogue does not cover)")
 
 
 def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisances: Sequence[Nuisance]) -> None:

@@ -53,6 +53,15 @@ class DiagnosisReport:
     residuals_before, residuals_after : ResidualAnalysis
     message : str
         One sentence: what was found, or "no effect found" and whether the residual is white.
+    data : Trajectory or None
+        The (first) record, with any column an effect added.
+    rejected : tuple of EffectCandidate
+        Candidates that were significant on the data they were fitted to but did not lower the free-run error on
+        held-out data: not findings; their ``explained`` holds ``held_out_t`` and the held-out NRMSE without and
+        with them.
+    dropped_terms : tuple of str
+        Terms of the model before (``"row: term"``) dropped once an effect made them redundant (a spring standing
+        in for friction).
     """
 
     effects: tuple[EffectCandidate, ...]
@@ -68,18 +77,22 @@ class DiagnosisReport:
     residuals_after: ResidualAnalysis
     message: str
     data: Trajectory | None = None
+    rejected: tuple[EffectCandidate, ...] = ()
+    dropped_terms: tuple[str, ...] = ()
 
     @property
     def found(self) -> bool:
         return bool(self.effects)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: ``effects`` (ranked, empty when none), ``before``/``after`` with ``nrmse_pct`` and ``r2``."""
+        """JSON form: ``effects`` (accepted, in the order found; empty when none), ``before``/``after`` with
+        ``nrmse_pct`` and ``r2``, ``rejected`` (candidates that failed on held-out data) and ``dropped_terms``."""
         return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
                 "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
                 "trials": [[{"name": c.name, "attached_to": c.attached_to, "delta_bic": c.delta_bic,
                              "significant": c.significant, "parameters": dict(c.parameters)} for c in round_]
                            for round_ in self.trials],
+                "rejected": [e.to_dict() for e in self.rejected], "dropped_terms": list(self.dropped_terms),
                 "equations_after": self.model_after.equations()}
 
     def plot_evidence(self, path: str | os.PathLike) -> Path:
@@ -148,6 +161,18 @@ class DiagnosisReport:
             {"": "before", **{k: self.before[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}},
             {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
             caption="free-run simulation against the data; means over the states")
+        if self.rejected:
+            report.add_table("Rejected: better in-sample, not on held-out data", [
+                {"effect": c.name, "attached to": c.attached_to,
+                 "held-out NRMSE without [%]": float(f"{c.explained.get('held_out_nrmse_without_pct', np.nan):.4g}"),
+                 "held-out NRMSE with [%]": float(f"{c.explained.get('held_out_nrmse_with_pct', np.nan):.4g}"),
+                 "held-out t": float(f"{c.explained.get('held_out_t', np.nan):.3g}"),
+                 **{k: float(f"{v:.5g}") for k, v in c.parameters.items()}} for c in self.rejected],
+                caption="each model fitted on one half of every record and simulated on the other half; an effect "
+                        "is accepted only if it lowers that error by more than noise explains")
+        if self.dropped_terms:
+            report.add_text("Terms dropped", "No longer needed once the effects were in: " +
+                            ", ".join(self.dropped_terms))
         report.add_table("Candidates (first round)", [
             {"effect": c.name, "attached to": c.attached_to, "nuisance": c.nuisance, "delta BIC": round(c.delta_bic, 1),
              "p-value": float(f"{c.p_value:.3g}"), "significant": c.significant} for c in self.ranking])
