@@ -1,0 +1,80 @@
+"""The benchmark's independent simulator (benchmarks/independent_plants.py) against known answers.
+
+A single mass with viscous friction under a constant force matches the analytic solution; a record's effect,
+re-simulated here with and without it on the record's own input, contributes 2-20x the noise, as its
+calibration says; the written noise has the stated level; a record is the same from the same seed.
+"""
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # benchmarks/ is not a package
+import independent_plants as ip  # noqa: E402
+
+
+def test_single_mass_matches_the_analytic_solution():
+    m, b, force, dt, n = 2.0, 0.5, 3.0, 1e-2, 400
+    plant = ip.Plant("single", {"m": m, "b": b, "k": 0.0})
+    states, cmd = ip.simulate(plant, [], dt, n, u=np.full(n, force))
+    t = np.arange(n + 1) * dt
+    v = force / b * (1 - np.exp(-b * t / m))
+    x = force / b * (t - m / b * (1 - np.exp(-b * t / m)))
+    assert np.allclose(cmd, force)
+    assert np.allclose(states[:, 1], v, rtol=1e-5, atol=1e-8)
+    assert np.allclose(states[:, 0], x, rtol=1e-5, atol=1e-8)
+
+
+def test_coulomb_friction_sticks_below_its_force():
+    """A force below Fc leaves the mass (nearly) at rest: the sharp tanh is integrated, not smeared."""
+    plant = ip.Plant("single", {"m": 1.0, "b": 0.1, "k": 0.0})
+    friction = {"name": "coulomb_friction", "row": "v", "params": {"Fc": 1.0, "eps": 1e-5}}
+    states, _ = ip.simulate(plant, [friction], 1e-3, 1000, u=np.full(1000, 0.8))
+    # stuck: the speed sits where the smooth friction balances the force, eps * atanh(0.8), 1e-5 m/s
+    assert states[-1, 1] == pytest.approx(1e-5 * math.atanh(0.8), rel=1e-3)
+    assert np.max(np.abs(states[:, 1])) < 2e-5
+    moving, _ = ip.simulate(plant, [friction], 1e-3, 1000, u=np.full(1000, 1.5))
+    assert moving[-1, 1] == pytest.approx(0.5 * 1.0 * (1 - math.exp(-0.1)) / 0.1, rel=1e-3)  # (u-Fc)/b (1-e^-bt/m)
+
+
+@pytest.fixture(scope="module")
+def record():
+    """An open-loop record with one effect (found among the first seeds), short."""
+    for i in range(40):
+        rec = ip.make_record(i, max_samples=1500)
+        if rec.spec["excitation"] != "closed_loop" and len(rec.spec["effects"]) == 1:
+            return rec
+    raise AssertionError("no open-loop record with one effect among the first 40 seeds")
+
+
+def test_calibrated_effect_contributes_2_to_20_times_the_noise(record):
+    spec = record.spec
+    plant = ip.Plant(spec["plant"]["kind"], {k: v for k, v in spec["plant"].items() if k != "kind"})
+    n = spec["samples"] - 1
+    u = record.train[plant.input][:-1]
+    effects = [{k: e[k] for k in ("name", "at", "row", "params")} for e in spec["effects"]]
+    without, _ = ip.simulate(plant, [], spec["dt"], n, u=u)
+    with_it, _ = ip.simulate(plant, effects, spec["dt"], n, u=u)
+    written = [s for s in plant.states if s in record.train]
+    ratios = [np.sqrt(np.mean((with_it[:, plant.states.index(s)] - without[:, plant.states.index(s)]) ** 2))
+              / spec["sigma"][s] for s in written]
+    ratio = float(np.sqrt(np.mean(np.square(ratios))))
+    assert 2.0 <= ratio <= 20.0
+    assert ratio == pytest.approx(spec["effects"][0]["ratio"], rel=1e-6)
+    for s in written:  # the written noise is the stated level
+        noise = record.train[s] - with_it[:, plant.states.index(s)]
+        assert np.std(noise) == pytest.approx(spec["sigma"][s], rel=0.1)
+
+
+def test_a_record_is_the_same_from_the_same_seed(record):
+    again = ip.make_record(record.index, max_samples=1500)
+    for name, values in record.train.items():
+        assert np.array_equal(values, again.train[name])
+    for name, values in record.heldout.items():
+        assert np.array_equal(values, again.heldout[name])
+    twin_input, train_input = record.heldout[ip.Plant(record.spec["plant"]["kind"], {}).input], \
+        record.train[ip.Plant(record.spec["plant"]["kind"], {}).input]
+    assert not np.array_equal(twin_input, train_input)  # the twin has its own excitation
