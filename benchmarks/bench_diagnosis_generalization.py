@@ -209,6 +209,7 @@ def heldout_nrmse(model_path_or_model: Any, folder: Path, spec: dict, cli: dict)
 def _model_before_a(folder: Path, cli: dict):
     """Path (a)'s model before, fitted in-process as ``cosim diagnose`` fits it without --model."""
     from cosim.data.datafile import load_data
+    from cosim.diagnose.diagnosis import BASE_SETTINGS  # the settings `cosim diagnose` identifies with
     from cosim.identify.sindyc import SINDYc
 
     states, derived = cli["states"], cli["derive"]
@@ -217,9 +218,7 @@ def _model_before_a(folder: Path, cli: dict):
     roles = {**dict.fromkeys(states, "state"), cli["input"]: "input"}
     data = load_data(folder / "train.csv", columns=columns, roles=roles, derive=derived).select(
         [*states, cli["input"]])
-    known = {p: f"{p}_dot" for p in derived}
-    return SINDYc(library="linear", include_constant=True, threshold=0.0, kinematics=known or None,
-                  refine="output_error").fit(data, states=states, inputs=[cli["input"]]).model_
+    return SINDYc(**BASE_SETTINGS).fit(data, states=states, inputs=[cli["input"]]).model_
 
 
 # ---------------------------------------------------------------------------------------------- one record

@@ -198,3 +198,15 @@ def test_batched_scores_match_one_by_one(derived_velocity):
         if want["coef"] is not None and len(want["coef"]):
             np.testing.assert_allclose(got["coef"], want["coef"], rtol=1e-7)
             np.testing.assert_allclose(got["se"], want["se"], rtol=1e-7)
+
+
+def test_compiled_rk4_gives_the_interpreters_bits(monkeypatch):
+    from cosim.identify import terms
+
+    m = friction_model()
+    u = drive(terms._JIT_MIN_STEPS + 500, gain=300.0)[:, None]
+    compiled = m.simulate([0.1, 0.0], u[:-1], dt=DT).states  # long enough to be run compiled
+    monkeypatch.setattr(terms, "_JIT_MIN_STEPS", 10 ** 9)
+    interpreted = m.simulate([0.1, 0.0], u[:-1], dt=DT).states
+    assert np.ptp(compiled[:, 1]) > 0.1
+    np.testing.assert_array_equal(compiled, interpreted)

@@ -342,6 +342,11 @@ def compile_rk4(states: Sequence[str], inputs: Sequence[str], terms: Sequence[Te
 
 #: Steps of one call of a CasADi run (the last call is padded with held inputs; its extra steps are dropped).
 _CASADI_CHUNK = 1024
+#: Records of at least this many steps are run by the chunk compiled to machine code (CasADi's JIT through the
+#: system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits, 0.2 s to compile a
+#: model structure once per process); shorter ones by the interpreter, which needs no compilation. Measured on
+#: a 20 000-sample two-mass diagnosis: 13.1 s -> 11.9 s (compiling only from a structure's 6th long run: 12.9 s).
+_JIT_MIN_STEPS = 8 * _CASADI_CHUNK
 
 
 def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequence[Term], coef: np.ndarray):
@@ -368,11 +373,12 @@ def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequ
         rows = np.asarray(rows, dtype=float).reshape(len(rows), len(inputs))
         steps, out = len(rows), []
         state = np.asarray(x0, dtype=float)
+        runner = chunk(nsub, steps >= _JIT_MIN_STEPS)
         for first in range(0, steps, _CASADI_CHUNK):
             block = rows[first:first + _CASADI_CHUNK]
             held = np.vstack([block, np.repeat(block[-1:], _CASADI_CHUNK - len(block), axis=0)]) \
                 if len(block) < _CASADI_CHUNK else block
-            result = np.asarray(chunk(nsub)(state, held.T, h, params)).T[:len(block)]
+            result = np.asarray(runner(state, held.T, h, params)).T[:len(block)]
             bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
             if bad.any():
                 k = int(np.argmax(bad))
@@ -417,8 +423,10 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
             out.append(ca.SX(0.0) if acc is None else acc)
         return out
 
-    @lru_cache(maxsize=4)
-    def chunk(nsub: int):
+    @lru_cache(maxsize=8)
+    def chunk(nsub: int, jit: bool = False):
+        if jit:
+            return _compiled(chunk(nsub), n, m, n_coef + n_numbers) or chunk(nsub)
         s = [x[i] for i in range(n)]
         for _ in range(nsub):  # the arithmetic of compile_rk4, in its order
             a = rhs(s)
@@ -430,3 +438,17 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
         return step.mapaccum("rk4_run", _CASADI_CHUNK, [0], [0])
 
     return chunk
+
+
+def _compiled(run, n: int, m: int, n_params: int):
+    """`run` (a CasADi chunk) compiled to machine code by CasADi's JIT, or None where no C compiler works."""
+    import casadi as ca
+
+    x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
+    try:
+        compiled = ca.Function("rk4_jit", [x, u, h, p], [run(x, u, h, p)],
+                               {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}})
+        compiled(np.zeros(n), np.zeros((m, _CASADI_CHUNK)), 0.0, np.zeros(n_params))  # compiles here
+    except Exception:  # no compiler, or it failed: the interpreter runs the same arithmetic  # noqa: BLE001
+        return None
+    return compiled
