@@ -210,3 +210,6 @@ def test_compiled_rk4_gives_the_interpreters_bits(monkeypatch):
     interpreted = m.simulate([0.1, 0.0], u[:-1], dt=DT).states
     assert np.ptp(compiled[:, 1]) > 0.1
     np.testing.assert_array_equal(compiled, interpreted)
+    from cosim.plant.build import fmu_cache_dir
+
+    assert list((fmu_cache_dir() / "jit").glob("cosim_rk4_*.so"))  # it was compiled, and kept

@@ -342,10 +342,9 @@ def compile_rk4(states: Sequence[str], inputs: Sequence[str], terms: Sequence[Te
 
 #: Steps of one call of a CasADi run (the last call is padded with held inputs; its extra steps are dropped).
 _CASADI_CHUNK = 1024
-#: Records of at least this many steps are run by the chunk compiled to machine code (CasADi's JIT through the
-#: system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits, 0.2 s to compile a
-#: model structure once per process); shorter ones by the interpreter, which needs no compilation. Measured on
-#: a 20 000-sample two-mass diagnosis: 13.1 s -> 11.9 s (compiling only from a structure's 6th long run: 12.9 s).
+#: Records of at least this many steps are run by the chunk compiled to machine code (:mod:`._jit`, through the
+#: system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits; 0.2 s to compile a
+#: model structure the first time on a machine, then loaded from the cache); shorter ones by the interpreter.
 _JIT_MIN_STEPS = 8 * _CASADI_CHUNK
 
 
@@ -441,14 +440,10 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
 
 
 def _compiled(run, n: int, m: int, n_params: int):
-    """`run` (a CasADi chunk) compiled to machine code by CasADi's JIT, or None where no C compiler works."""
+    """`run` (a CasADi chunk) as machine code (:mod:`cosim.identify._jit`), or None where no C compiler works."""
     import casadi as ca
 
+    from ._jit import compiled
+
     x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
-    try:
-        compiled = ca.Function("rk4_jit", [x, u, h, p], [run(x, u, h, p)],
-                               {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}})
-        compiled(np.zeros(n), np.zeros((m, _CASADI_CHUNK)), 0.0, np.zeros(n_params))  # compiles here
-    except Exception:  # no compiler, or it failed: the interpreter runs the same arithmetic  # noqa: BLE001
-        return None
-    return compiled
+    return compiled(ca.Function("cosim_rk4", [x, u, h, p], [run(x, u, h, p)]), "cosim_rk4")
