@@ -213,3 +213,22 @@ def test_compiled_rk4_gives_the_interpreters_bits(monkeypatch):
     from cosim.plant.build import fmu_cache_dir
 
     assert list((fmu_cache_dir() / "jit").glob("cosim_rk4_*.so"))  # it was compiled, and kept
+
+
+def test_compiled_linear_run_gives_the_python_loops_bits(monkeypatch):
+    from cosim.identify import terms
+
+    stable = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("x", "v", "u"),
+                             coef=np.array([[0.0, 1.0, 0.0], [-K, -B, 1.0]]))
+    unstable = IdentifiedModel(states=("x",), inputs=(), terms=("x",), coef=np.array([[40.0]]))
+    u = drive(terms._JIT_MIN_STEPS + 700, gain=30.0)[:, None]
+    runs = []
+    for limit in (terms._JIT_MIN_STEPS, 10 ** 9):  # compiled, then the Python loop
+        monkeypatch.setattr("cosim.identify.model._JIT_MIN_STEPS", limit)
+        runs.append((stable.simulate([0.1, 0.0], u[:-1], dt=DT),
+                     unstable.simulate([1.0], n_steps=terms._JIT_MIN_STEPS, dt=DT)))
+    (compiled, fast), (looped, slow) = runs
+    assert compiled.ok and np.ptp(compiled.states[:, 0]) > 0.1
+    np.testing.assert_array_equal(compiled.states, looped.states)
+    assert fast.status == slow.status == "diverged" and fast.message == slow.message
+    np.testing.assert_array_equal(fast.states, slow.states)

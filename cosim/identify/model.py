@@ -37,7 +37,7 @@ from scipy.linalg import expm
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..files import check_file_format, write_text_atomic
-from .terms import Term, compile_rhs, compile_rk4, compile_rk4_casadi
+from .terms import _JIT_MIN_STEPS, Term, compile_linear_run, compile_rhs, compile_rk4, compile_rk4_casadi
 
 __all__ = ["IdentifiedModel", "SimulationResult", "MODEL_FORMAT", "MODEL_VERSION", "DIVERGENCE_LIMIT"]
 
@@ -271,6 +271,12 @@ class IdentifiedModel:
 
     def _simulate_linear(self, x: np.ndarray, u: np.ndarray, dt: float) -> tuple[str, int]:
         ad, bd, cd = self.discretize(dt)
+        if u.shape[0] >= _JIT_MIN_STEPS:  # a long record: the same arithmetic, compiled (terms.compile_linear_run)
+            run = compile_linear_run(ad)
+            if run is not None:
+                status, k, states = run(x[0], u @ bd.T + cd, DIVERGENCE_LIMIT)
+                x[1:len(states) + 1] = states
+                return status, k
         step = _linear_step(ad)
         drive = (u @ bd.T + cd).tolist()
         state = x[0].tolist()

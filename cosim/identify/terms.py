@@ -447,3 +447,56 @@ def _compiled(run, n: int, m: int, n_params: int):
 
     x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
     return compiled(ca.Function("cosim_rk4", [x, u, h, p], [run(x, u, h, p)]), "cosim_rk4")
+
+
+def compile_linear_run(ad: np.ndarray):
+    """A compiled run of ``x[k+1] = ad @ x[k] + d[k]`` with the arithmetic of the Python step of a linear model
+    (``a_i0*x0 + a_i1*x1 + ... + d_i``, non-zero entries, in that order: the same bits), as
+    ``run(x0, drive, limit) -> (status, k, states)`` like :func:`compile_rk4_casadi`'s; None where nothing can
+    be compiled. For long records: a Python loop costs 50 ms a 20 000-sample run, this one 2 ms."""
+    pattern = np.asarray(ad) != 0.0
+    chunk = _linear_chunk(pattern.shape[0], pattern.tobytes())
+    if chunk is None:
+        return None
+    params = np.asarray(ad, dtype=float)[pattern]
+
+    def run(x0, drive, limit):
+        steps, out = len(drive), []
+        state = np.asarray(x0, dtype=float)
+        for first in range(0, steps, _CASADI_CHUNK):
+            block = drive[first:first + _CASADI_CHUNK]
+            held = np.vstack([block, np.zeros((_CASADI_CHUNK - len(block), block.shape[1]))]) \
+                if len(block) < _CASADI_CHUNK else block
+            result = np.asarray(chunk(state, held.T, params)).T[:len(block)]
+            bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
+            if bad.any():
+                k = int(np.argmax(bad))
+                out.append(result[:k])
+                return "diverged", first + k, np.concatenate(out)
+            out.append(result)
+            state = result[-1]
+        return "ok", steps, np.concatenate(out) if out else np.zeros((0, len(state)))
+
+    return run
+
+
+@lru_cache(maxsize=32)
+def _linear_chunk(n: int, pattern_bytes: bytes):
+    """The compiled chunk of a linear step with this sparsity (coefficients as parameters), or None."""
+    import casadi as ca
+
+    from ._jit import compiled
+
+    pattern = np.frombuffer(pattern_bytes, dtype=bool).reshape(n, n)
+    s, d, p = ca.SX.sym("s", n), ca.SX.sym("d", n), ca.SX.sym("p", int(pattern.sum()))
+    rows, c = [], 0
+    for i in range(n):
+        acc = None
+        for j in range(n):
+            if pattern[i, j]:
+                acc = p[c] * s[j] if acc is None else acc + p[c] * s[j]
+                c += 1
+        rows.append(d[i] if acc is None else acc + d[i])
+    run = ca.Function("linear_step", [s, d, p], [ca.vertcat(*rows)]).mapaccum("linear_run", _CASADI_CHUNK, [0], [0])
+    x, u, q = ca.MX.sym("x", n), ca.MX.sym("d", n, _CASADI_CHUNK), ca.MX.sym("p", int(pattern.sum()))
+    return compiled(ca.Function("cosim_linear", [x, u, q], [run(x, u, q)]), "cosim_linear")
