@@ -135,13 +135,10 @@ class HeldOutCheck:
         self.dt, self.sigma, self.estimate_x0 = float(dt), dict(sigma), bool(estimate_x0)
         self.measured = None if measured is None else tuple(measured)
         self.segments = [int(s) for s in segments]
-        self.folds = Folds.of(columns, self.segments)
+        #: Whether the records are long enough to be split (the folds themselves are cut in :meth:`judge`, from
+        #: the columns with whatever an effect adds).
+        self.possible = Folds.of(columns, self.segments) is not None
         self._base: tuple[IdentifiedModel, list[np.ndarray]] | None = None
-
-    @property
-    def possible(self) -> bool:
-        """Whether the records are long enough to be split."""
-        return self.folds is not None
 
     def _fold_residuals(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray]) -> list[np.ndarray]:
         """For each fold: `model` fitted on it, its scaled free-run residual on the other fold."""

@@ -370,24 +370,31 @@ def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequ
 
     def run(x0, rows, h, nsub, limit):
         rows = np.asarray(rows, dtype=float).reshape(len(rows), len(inputs))
-        steps, out = len(rows), []
-        state = np.asarray(x0, dtype=float)
-        runner = chunk(nsub, steps >= _JIT_MIN_STEPS)
-        for first in range(0, steps, _CASADI_CHUNK):
-            block = rows[first:first + _CASADI_CHUNK]
-            held = np.vstack([block, np.repeat(block[-1:], _CASADI_CHUNK - len(block), axis=0)]) \
-                if len(block) < _CASADI_CHUNK else block
-            result = np.asarray(runner(state, held.T, h, params)).T[:len(block)]
-            bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
-            if bad.any():
-                k = int(np.argmax(bad))
-                out.append(result[:k])
-                return "diverged", first + k, np.concatenate(out)
-            out.append(result)
-            state = result[-1]
-        return "ok", steps, np.concatenate(out) if out else np.zeros((0, len(states)))
+        runner = chunk(nsub, len(rows) >= _JIT_MIN_STEPS)
+        return _chunked_run(lambda state, held: runner(state, held, h, params), x0, rows, limit)
 
     return run
+
+
+def _chunked_run(call, x0, rows: np.ndarray, limit: float):
+    """Step a CasADi chunk (`call(state, rows.T)`, :data:`_CASADI_CHUNK` steps) over `rows` from `x0`, the last
+    call padded with the last row held (its extra steps dropped); stop at the first state at or beyond `limit`
+    (or NaN). Returns ``(status, steps done, states after each step)``."""
+    steps, out = len(rows), []
+    state = np.asarray(x0, dtype=float)
+    for first in range(0, steps, _CASADI_CHUNK):
+        block = rows[first:first + _CASADI_CHUNK]
+        held = np.vstack([block, np.repeat(block[-1:], _CASADI_CHUNK - len(block), axis=0)]) \
+            if len(block) < _CASADI_CHUNK else block
+        result = np.asarray(call(state, held.T)).T[:len(block)]
+        bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
+        if bad.any():
+            k = int(np.argmax(bad))
+            out.append(result[:k])
+            return "diverged", first + k, np.concatenate(out)
+        out.append(result)
+        state = result[-1]
+    return "ok", steps, np.concatenate(out) if out else np.zeros((0, len(state)))
 
 
 @lru_cache(maxsize=64)
@@ -461,21 +468,8 @@ def compile_linear_run(ad: np.ndarray):
     params = np.asarray(ad, dtype=float)[pattern]
 
     def run(x0, drive, limit):
-        steps, out = len(drive), []
-        state = np.asarray(x0, dtype=float)
-        for first in range(0, steps, _CASADI_CHUNK):
-            block = drive[first:first + _CASADI_CHUNK]
-            held = np.vstack([block, np.zeros((_CASADI_CHUNK - len(block), block.shape[1]))]) \
-                if len(block) < _CASADI_CHUNK else block
-            result = np.asarray(chunk(state, held.T, params)).T[:len(block)]
-            bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
-            if bad.any():
-                k = int(np.argmax(bad))
-                out.append(result[:k])
-                return "diverged", first + k, np.concatenate(out)
-            out.append(result)
-            state = result[-1]
-        return "ok", steps, np.concatenate(out) if out else np.zeros((0, len(state)))
+        return _chunked_run(lambda state, held: chunk(state, held, params), x0, np.asarray(drive, dtype=float),
+                            limit)
 
     return run
 
