@@ -58,10 +58,7 @@ def _run(parameters, seed, excitation, duration):
 @pytest.mark.parametrize(("parameters", "effect", "attached", "key", "true", "tolerance", "excitation", "duration"), [
     ({"Fc": 100.0}, "coulomb_friction", "omega_m", "Fc", 100.0, 0.05, MULTISINE, 2.0),
     ({"Bm_asym": 300.0}, "viscous_asymmetry", "omega_m", "viscous_asymmetry", 300.0, 0.10, MULTISINE, 2.0),
-    pytest.param({"Tmax": 700.0}, "saturation", "Tm", "level", 700.0, 0.10, MULTISINE, 2.0,
-                 marks=pytest.mark.xfail(strict=True, reason="issue 13: a cogging on theta_L at 795 periods/rad "
-                                         "(the record-bounded grid) wins; the saturation's trial fit (level 697) "
-                                         "no longer lowers the cost")),
+    ({"Tmax": 700.0}, "saturation", "Tm", "level", 700.0, 0.10, MULTISINE, 2.0),
     # 3 s: the stiction shows only at the speed reversals (2 s: Fs 10.7 % low)
     ({"Fs": 150.0, "vs": 0.02}, "stribeck", "omega_m", "Fs", 150.0, 0.10, MULTISINE, 3.0),
     ({"delay": 0.002}, "delay", "Tm", "delay_s", 0.002, 0.10, MULTISINE, 2.0),

@@ -232,3 +232,27 @@ def test_duffing_oscillator_gets_a_cubic_spring_on_its_position():
     assert found.parameters["k3"] == pytest.approx(K3, rel=0.10)
     assert 0.0 < found.uncertainty["k3"] < 0.05 * K3
     assert report.after["nrmse_pct"] * 10 < report.before["nrmse_pct"]
+
+
+@pytest.mark.slow
+def test_duffing_positions_only_default_cli_path_names_the_cubic_spring(tmp_path):
+    """Issue 13: positions only (the velocity derived with the data-chosen window), the default path
+    (`cosim diagnose DATA` identifies first; no per-case option): `cubic_stiffness` on x, k3 within 10 %."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cosim.cli import main
+
+    data = duffing()
+    path = tmp_path / "duffing.csv"
+    np.savetxt(path, np.column_stack([data.time, data["x"], data["u"]]), delimiter=",", header="time,x,u",
+               comments="")
+    result = CliRunner().invoke(main, ["diagnose", str(path), "--state", "x,x_dot", "--derive", "x", "--input", "u",
+                                       "--json"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    payload = json.loads(result.stdout)
+    assert payload["effects"], payload["message"]
+    found = payload["effects"][0]
+    assert (found["name"], found["attached_to"]) == ("cubic_stiffness", "x"), payload["message"]
+    assert found["parameters"]["k3"] == pytest.approx(K3, rel=0.10)

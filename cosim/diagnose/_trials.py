@@ -327,3 +327,55 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
     if cand.nuisance_se and effect.nuisance in params:
         unc[effect.nuisance] = float(cand.nuisance_se)
     return replace(cand, parameters=params, uncertainty=unc)
+
+
+def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, nuisances: list[Nuisance],
+                 alpha: float, bic_margin: float, min_size: float, fit: _FitOptions,
+                 check: Any = None) -> EffectCandidate | None:
+    """The base model's constant force, judged as an effect: an ``offset`` finding, or None.
+
+    The base keeps a constant in its equations (without it a spring to ground stands in for an offset, and is
+    never removed), so the ``offset`` effect is never screened. Once the rounds are over, the constants that
+    are left in the dynamic rows are tested the way a candidate is, against the model without them: the
+    likelihood-ratio p-value, the BIC change, the size, and (with `check`, a
+    :class:`~cosim.diagnose._holdout.HeldOutCheck`) the held-out free-run error. Only the rows whose constant
+    stands :data:`ROW_T_MIN` standard errors clear of zero are named.
+    """
+    if "1" not in current.terms:
+        return None
+    k = current.terms.index("1")
+    dynamic = [current.states.index(r) for r in Roles.of(current).dynamic_rows]
+    rows = [i for i in dynamic if current.coef[i, k] != 0.0]
+    if not rows:
+        return None
+    coef = current.coef.copy()
+    coef[rows, k] = 0.0
+    reduced = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=coef,
+                              dt=current.dt, meta=current.meta)
+    try:
+        reduced, _, _ = output_error_fit(reduced, columns, dt, nuisances=nuisances, iterations=40, **fit.kw)
+        screen = OutputErrorScreen(reduced, columns, dt, **fit.kw)
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return None
+    cost_full = float(current.meta["refinement"]["cost"])
+    cost_reduced = float(reduced.meta["refinement"]["cost"])
+    if cost_reduced <= cost_full:
+        return None
+    delta_bic, p_value, size, factor = _evidence(screen, current, columns, dt, cost_reduced, cost_full, len(rows),
+                                                 fit)
+    if not (p_value < alpha and delta_bic < -bic_margin and size >= min_size):
+        return None
+    se = np.asarray(current.meta["refinement"]["std_error"], dtype=float)
+    named = tuple(current.states[i] for i in rows if abs(current.coef[i, k]) >= ROW_T_MIN * se[i, k])
+    if not named:
+        return None
+    explained = {"size": size, "plausible": True, "correlation_factor": factor}
+    if check is not None:
+        evidence = check.judge(reduced, current, columns)
+        explained.update(evidence.as_explained())
+        if not evidence.passed:
+            return None
+    effect = EFFECTS["offset"]
+    cand = EffectCandidate("offset", "constant", named, None, ("1",), delta_bic, p_value, explained, True,
+                           meaning=effect.meaning)
+    return _final_parameters(cand, current)

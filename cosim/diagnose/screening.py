@@ -531,17 +531,29 @@ def initial_state_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray],
     return InitialStateFit(screen.x0, screen.residual.reshape(-1, len(model.states)), cost, screen.sigma)
 
 
+#: A nuisance's terms carry a force when it is above this share of their row's RMS force (see
+#: :func:`_nuisance_columns`).
+LIVE_FORCE = 1e-9
+
+
 def _nuisance_columns(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance]) -> list:
-    """Sensitivity of the free run to log(value) of each nuisance parameter (one integration for all)."""
+    """Sensitivity of the free run to log(value) of each nuisance parameter (one integration for all).
+
+    A nuisance whose terms carry no force yet (an effect started from zero coefficients: its force is below
+    :data:`LIVE_FORCE` of its row's) has no sensitivity: its column is zero, so the step leaves it where it is
+    until the coefficients have grown. Its finite-difference column would be round-off, and a least-squares
+    step on it arbitrarily large."""
     if not nuis:
         return []
     h = 0.02
     n = len(model.states)
     forcing = np.zeros((len(screen.x_sim) - 1, n, len(nuis)))
+    row_rms = None
     for j, nu in enumerate(nuis):
         present = nu.terms
         up, down = nu.make_terms(nu.value * math.exp(h)), nu.make_terms(nu.value * math.exp(-h))
         f_up, f_down = screen._term_values(up), screen._term_values(down)
+        own = np.zeros((len(f_up), n))
         for t_i, term in enumerate(present):
             if term not in model.terms:
                 continue
@@ -549,6 +561,12 @@ def _nuisance_columns(screen: OutputErrorScreen, model: IdentifiedModel, nuis: S
             for i in range(n):
                 if model.coef[i, k] != 0.0:
                     forcing[:, i, j] += model.coef[i, k] * (f_up[:, t_i] - f_down[:, t_i]) / (2 * h)
+                    own[:, i] += model.coef[i, k] * (f_up[:, t_i] + f_down[:, t_i]) / 2
+        if row_rms is None:
+            row_rms = np.sqrt(np.mean((screen._term_values(model.terms) @ model.coef.T) ** 2, axis=0))
+        live = np.sqrt(np.mean(own ** 2, axis=0)) > LIVE_FORCE * row_rms
+        if not np.any(live & (row_rms > 0)):
+            forcing[:, :, j] = 0.0
     sens = screen._flatten_owned(screen._integrate(forcing))
     return [sens[:, j] for j in range(len(nuis))]
 
