@@ -24,6 +24,7 @@ from scipy import stats
 
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
+from ._ranking import TIE_BIC
 from .candidates import EffectCandidate, _uncertainty
 from .effects import EFFECTS, Attachment, Effect, Roles
 from .screening import (
@@ -331,15 +332,16 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
 
 def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, nuisances: list[Nuisance],
                  alpha: float, bic_margin: float, min_size: float, fit: _FitOptions,
-                 check: Any = None) -> EffectCandidate | None:
-    """The base model's constant force, judged as an effect: an ``offset`` finding, or None.
+                 check: Any = None) -> tuple[EffectCandidate, IdentifiedModel] | None:
+    """The base model's constant force, judged as an effect: an ``offset`` finding and the model with it, or None.
 
     The base keeps a constant in its equations (without it a spring to ground stands in for an offset, and is
-    never removed), so the ``offset`` effect is never screened. Once the rounds are over, the constants that
-    are left in the dynamic rows are tested the way a candidate is, against the model without them: the
-    likelihood-ratio p-value, the BIC change, the size, and (with `check`, a
-    :class:`~cosim.diagnose._holdout.HeldOutCheck`) the held-out free-run error. Only the rows whose constant
-    stands :data:`ROW_T_MIN` standard errors clear of zero are named.
+    never removed), so the ``offset`` effect is never screened. Once the rounds are over, the constants left in
+    the dynamic rows are tested the way a candidate is, against the model without them: the likelihood-ratio
+    p-value, the BIC change, the size, and (with `check`, a :class:`~cosim.diagnose._holdout.HeldOutCheck`) the
+    held-out free-run error. With several rows, the offset is named in one row when the model with that row's
+    constant alone does as well by BIC (two constants of a free two-mass plant are so correlated that each
+    one's own standard error says nothing); the others are then removed from the model.
     """
     if "1" not in current.terms:
         return None
@@ -348,34 +350,115 @@ def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: f
     rows = [i for i in dynamic if current.coef[i, k] != 0.0]
     if not rows:
         return None
-    coef = current.coef.copy()
-    coef[rows, k] = 0.0
-    reduced = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=coef,
-                              dt=current.dt, meta=current.meta)
-    try:
-        reduced, _, _ = output_error_fit(reduced, columns, dt, nuisances=nuisances, iterations=40, **fit.kw)
-        screen = OutputErrorScreen(reduced, columns, dt, **fit.kw)
-    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+    reduced = _refit_without(current, [(i, k) for i in rows], columns, dt, nuisances, fit)
+    if reduced is None:
         return None
-    cost_full = float(current.meta["refinement"]["cost"])
-    cost_reduced = float(reduced.meta["refinement"]["cost"])
-    if cost_reduced <= cost_full:
+    screen = OutputErrorScreen(reduced, columns, dt, **fit.kw)
+
+    def without(model: IdentifiedModel, dropped: list[int]) -> float:
+        # the cost without the constants of `dropped`: the refit's, or the Wald (linearised) one if lower. A
+        # refit from the model with a constant zeroed can stall far from its optimum on a drifting free run,
+        # and a stalled refit would make any constant look necessary.
+        return min(_cost_of(reduced), _cost_of(model) + _wald_cost(model, [(i, "1") for i in dropped], screen.n_obs))
+
+    cost_full = _cost_of(current)
+    cost_reduced = without(current, rows)
+    if not cost_reduced > cost_full:
         return None
-    delta_bic, p_value, size, factor = _evidence(screen, current, columns, dt, cost_reduced, cost_full, len(rows),
-                                                 fit)
+    evidence = _evidence(screen, current, columns, dt, cost_reduced, cost_full, len(rows), fit)
+    if len(rows) > 1:  # one row's constant alone, the one whose model costs least, if that does as well
+        n_eff = screen.n_obs / evidence[3]
+        keep = min(rows, key=lambda i: _wald_cost(current, [(j, "1") for j in rows if j != i], screen.n_obs))
+        others = [j for j in rows if j != keep]
+        if n_eff * math.log(1.0 + _wald_cost(current, [(j, "1") for j in others], screen.n_obs) / cost_full) < \
+                len(others) * math.log(n_eff):
+            single = _refit_without(current, [(j, k) for j in others], columns, dt, nuisances, fit)
+            # kept only if its refit bears the linearised promise out (a stalled refit would not)
+            if single is not None and n_eff * math.log(_cost_of(single) / cost_full) < len(others) * math.log(n_eff):
+                current, rows = single, [keep]
+                cost_reduced = without(current, rows)
+                if not cost_reduced > _cost_of(current):
+                    return None
+                evidence = _evidence(screen, current, columns, dt, cost_reduced, _cost_of(current), 1, fit)
+    delta_bic, p_value, size, factor = evidence
     if not (p_value < alpha and delta_bic < -bic_margin and size >= min_size):
-        return None
-    se = np.asarray(current.meta["refinement"]["std_error"], dtype=float)
-    named = tuple(current.states[i] for i in rows if abs(current.coef[i, k]) >= ROW_T_MIN * se[i, k])
-    if not named:
         return None
     explained = {"size": size, "plausible": True, "correlation_factor": factor}
     if check is not None:
-        evidence = check.judge(reduced, current, columns)
-        explained.update(evidence.as_explained())
-        if not evidence.passed:
+        held = check.judge(reduced, current, columns)
+        explained.update(held.as_explained())
+        if not held.passed:
             return None
-    effect = EFFECTS["offset"]
-    cand = EffectCandidate("offset", "constant", named, None, ("1",), delta_bic, p_value, explained, True,
-                           meaning=effect.meaning)
-    return _final_parameters(cand, current)
+    cand = EffectCandidate("offset", "constant", tuple(current.states[i] for i in rows), None, ("1",), delta_bic,
+                           p_value, explained, True, meaning=EFFECTS["offset"].meaning)
+    return _final_parameters(cand, current), current
+
+
+def _cost_of(model: IdentifiedModel) -> float:
+    return float(model.meta["refinement"]["cost"])
+
+
+def _wald_cost(model: IdentifiedModel, entries: list[tuple[int, str]], n_obs: int) -> float:
+    """How much an output-error fit's cost rises when the coefficients at `entries` (row, term) are held at zero
+    and the others follow, to first order: the Wald statistic from the fit's covariance, in cost units
+    (infinite when the covariance does not cover them). `n_obs`: the residuals the fit counted."""
+    if not entries:
+        return 0.0
+    ref = model.meta["refinement"]
+    order = {(int(i), str(t)): j for j, (i, t) in enumerate(ref["parameters"])}
+    if not all(e in order for e in entries):
+        return math.inf
+    idx = [order[e] for e in entries]
+    cov = np.asarray(ref["covariance"], dtype=float)[np.ix_(idx, idx)]
+    c = np.array([model.coef[i, model.terms.index(t)] for i, t in entries])
+    try:
+        wald = float(c @ np.linalg.solve(cov, c))
+    except np.linalg.LinAlgError:
+        return math.inf
+    if not (math.isfinite(wald) and wald >= 0.0):  # a covariance that is no covariance: nothing to learn from it
+        return math.inf
+    # the covariance is the inverse Gauss-Newton Hessian times the residual variance, cost / (n - p)
+    variance = float(ref["cost"]) / max(n_obs - len(order), 1)
+    return wald * variance
+
+
+def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], columns: dict[str, np.ndarray],
+                   dt: float, nuisances: list[Nuisance], fit: _FitOptions) -> IdentifiedModel | None:
+    """`model` with the coefficients at `entries` (row, term) set to zero, refitted by output error (None if
+    the fit fails)."""
+    coef = model.coef.copy()
+    for entry in entries:
+        coef[entry] = 0.0
+    reduced = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
+                              meta=model.meta)
+    try:
+        return output_error_fit(reduced, columns, dt, nuisances=nuisances, iterations=40, **fit.kw)[0]
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return None
+
+
+def _bounded_first(trials: list[_Trial], n_obs: int) -> list[_Trial]:
+    """Trials best first, except that gravity goes before a softening spring to ground it ties with.
+
+    A cubic spring to ground with ``k3 < 0`` (softening) and gravity (the sine of an angle) bend a restoring
+    force the same way, ``sin x = x - x^3/6 + ...``: over a travel of a radian or two they fit alike, the
+    spring one parameter cheaper (gravity has a phase). Beyond the travel the softening spring turns over and
+    the model runs away; the sine stays bounded. So when the gravity trial's BIC change is within one
+    parameter's price (``log n``, plus :data:`~cosim.diagnose._ranking.TIE_BIC`) of the softening spring's, the
+    bounded explanation is taken first. A hardening spring, or a gravity trial that fits worse by more, keeps
+    the order.
+    """
+    if len(trials) < 2:
+        return trials
+    top = trials[0]
+    cand = top.candidate
+    if cand.name != "cubic_stiffness" or "-" in cand.attached_to:
+        return trials
+    if not _final_parameters(cand, top.model).parameters.get("k3", 0.0) < 0.0:
+        return trials
+    n_eff = n_obs / max(float(cand.explained.get("correlation_factor", 1.0)), 1.0)
+    price = math.log(n_eff) + TIE_BIC
+    for j, trial in enumerate(trials[1:], start=1):
+        if trial.candidate.name == "gravity" and trial.candidate.delta_bic < cand.delta_bic + price:
+            return [trial, *trials[:j], *trials[j + 1:]]
+    return trials

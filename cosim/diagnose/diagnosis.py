@@ -68,6 +68,7 @@ from ._holdout import HeldOutCheck
 from ._ranking import _round, check_effect_selection
 from ._trials import (
     _base_offset,
+    _bounded_first,
     _drop_redundant,
     _final_parameters,
     _fit_with,
@@ -306,8 +307,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         trials = [_fit_with(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                             iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
         fitted.append(tuple(t.candidate for t in trials if t is not None))
-        trials = sorted((t for t in trials if t is not None and t.candidate.significant),
-                        key=lambda t: t.candidate.delta_bic)
+        trials = _bounded_first(sorted((t for t in trials if t is not None and t.candidate.significant),
+                                       key=lambda t: t.candidate.delta_bic), screen.n_obs)
         best = None
         for trial in trials[:HELD_OUT_TRIES]:
             trial = _fit_with(current, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin,
@@ -342,7 +343,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         # the base's own constant, judged as an effect once the rounds are over (see _base_offset)
         offset = _base_offset(current, columns, dt, nuisances, alpha, bic_margin, min_size, fit, check)
         if offset is not None:
-            accepted.append(offset)
+            accepted.append(offset[0])
+            current = offset[1]
             steps.append((tuple(c.name for c in accepted), current))
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
     final = current
