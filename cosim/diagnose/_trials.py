@@ -332,8 +332,9 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
 
 def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, nuisances: list[Nuisance],
                  alpha: float, bic_margin: float, min_size: float, fit: _FitOptions,
-                 check: Any = None) -> tuple[EffectCandidate, IdentifiedModel] | None:
-    """The base model's constant force, judged as an effect: an ``offset`` finding and the model with it, or None.
+                 check: Any = None) -> tuple[EffectCandidate, IdentifiedModel, IdentifiedModel] | None:
+    """The base model's constant force, judged as an effect: an ``offset`` finding, the model with it and the
+    model without it (refitted), or None.
 
     The base keeps a constant in its equations (without it a spring to ground stands in for an offset, and is
     never removed), so the ``offset`` effect is never screened. Once the rounds are over, the constants left in
@@ -391,7 +392,7 @@ def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: f
             return None
     cand = EffectCandidate("offset", "constant", tuple(current.states[i] for i in rows), None, ("1",), delta_bic,
                            p_value, explained, True, meaning=EFFECTS["offset"].meaning)
-    return _final_parameters(cand, current), current
+    return _final_parameters(cand, current), current, reduced
 
 
 def _cost_of(model: IdentifiedModel) -> float:

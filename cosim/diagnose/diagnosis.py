@@ -346,6 +346,10 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             accepted.append(offset[0])
             current = offset[1]
             steps.append((tuple(c.name for c in accepted), current))
+            if len(accepted) == 1:  # the offset alone: "before" is the model without it, not the base that had it
+                without = offset[2]
+                res_before = residuals(without, first, x0=_first_x0(_fitted_x0(without, segments)))
+                before = _figures_of(without, truth, res_before, None, refitted=without)
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
     final = current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
