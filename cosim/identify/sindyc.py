@@ -388,7 +388,7 @@ class SINDYc:
                              sparse.coef_scale)
             model = _refine(starts, runs, dt, kin, sparse.coef_scale, meta, known_x0,
                             refine_options=self.refine_options, refine_initial_state=self.refine_initial_state,
-                            prune=self.threshold == "auto")
+                            prune=self.threshold == "auto", prefer_stable=not self.allow_unstable)
             if self.threshold == "auto":
                 threshold = meta["threshold"]["value"]
         meta["seconds"]["total"] = time.perf_counter() - started
