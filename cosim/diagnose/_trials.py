@@ -9,6 +9,8 @@ actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio 
   (``_physical_nuisance``);
 * ``_drop_redundant`` - the backward check: an effect found earlier goes when a later one makes it redundant;
 * ``_final_parameters`` - an accepted effect's physical parameters and standard errors from the final model;
+* ``_bounded_first`` - the order of a round's trials, gravity before a softening spring to ground it ties with;
+* ``_base_offset`` - the base model's constant, judged as an ``offset`` effect once the rounds are over;
 * ``_FitOptions`` - how every fit of one diagnosis treats the initial state and the noise levels.
 """
 
