@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -97,11 +98,11 @@ def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[
     runs_oe = [(x, u[:-1]) for x, u in runs]
     floor = _noise_floor(runs, meta)
     tried: list[dict[str, Any]] = []
-    fits: list[tuple[Any, np.ndarray, IdentifiedModel, dict[str, Any], int, bool]] = []
-    best: tuple[Any, np.ndarray, IdentifiedModel, dict[str, Any], int, bool] | None = None
+    fits: list[_Run] = []
     seconds = 0.0
     for (name, model), prior in order:
-        if best is not None and best[0].cost <= _FLOOR_MARGIN * floor and (best[5] or not prefer_stable):
+        best = _pick(fits, prefer_stable)
+        if best is not None and best.fit.cost <= _FLOOR_MARGIN * floor and (best.stable or not prefer_stable):
             break  # the free run already follows the data to its noise: no start can do much better
         support = model.coef != 0.0
         for pos in kin:
@@ -113,18 +114,13 @@ def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[
                                   coef_scale=coef_scale, **options)
         seconds += fit.seconds
         stable = _is_stable(model, fit.coef, runs, dt) if prefer_stable else True
-        fits.append((fit, support, model, options, len(tried), stable))
+        fits.append(_Run(fit, support, model, options, len(tried), stable))
         tried.append({"start": name, "prior": prior, "cost_start": fit.cost_start, "cost": fit.cost,
                       "status": fit.status, "seconds": fit.seconds, "stable": stable})
-        if best is None or (stable, -fit.cost) > (best[5], -best[0].cost):
-            best = (fit, support, model, options, len(tried) - 1, stable)
+    best = _pick(fits, prefer_stable)
     if best is None:  # pragma: no cover - there is always a start
         raise ValueError("no start to refine")
-    least = min(range(len(tried)), key=lambda k: tried[k]["cost"])
-    if best[0].cost > _STABLE_COST_RATIO * tried[least]["cost"]:
-        # the stable fit is far worse than the best one: no answer either, the unstable one is reported
-        best = fits[least]
-    fit, support, model, options, chosen, _ = best
+    fit, support, model, options, chosen = best.fit, best.support, best.model, best.options, best.index
     meta["multistart"] = {"method": "output-error refinement from each equation-error start, with and without "
                                     "the continuation prior; the least output-error cost wins" +
                                     (", a stable model before any unstable one" if prefer_stable else "") +
@@ -146,6 +142,33 @@ def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[
     meta["x0"] = [v.tolist() for v in fit.x0]
     meta["seconds"]["refinement"] = seconds
     return IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=fit.coef, dt=dt)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """One refinement of the multi-start: its fit, the coefficients it could move, its start and options, its
+    place in ``meta["multistart"]["runs"]``, and whether the model it gives is stable."""
+
+    fit: Any
+    support: np.ndarray
+    model: IdentifiedModel
+    options: dict[str, Any]
+    index: int
+    stable: bool
+
+
+def _pick(fits: Sequence[_Run], prefer_stable: bool) -> _Run | None:
+    """The winner among the refinements so far: the least cost; with `prefer_stable`, the least-cost stable one
+    if its cost is within :data:`_STABLE_COST_RATIO` of the least."""
+    if not fits:
+        return None
+    least = min(fits, key=lambda r: r.fit.cost)
+    stable = [r for r in fits if r.stable]
+    if prefer_stable and stable:
+        candidate = min(stable, key=lambda r: r.fit.cost)
+        if candidate.fit.cost <= _STABLE_COST_RATIO * least.fit.cost:
+            return candidate
+    return least
 
 
 def _is_stable(model: IdentifiedModel, coef: np.ndarray, runs: Sequence[tuple[np.ndarray, np.ndarray]],
