@@ -17,8 +17,10 @@ winner of a round is also cross-validated (two folds):
   held-out squared error over what measurement noise alone would give it (:func:`noise_z`).
 
 The effect is accepted only when that statistic exceeds :data:`HELD_OUT_T` over both folds together, i.e. it
-lowers the held-out error by more than noise explains. Held-out figures (NRMSE without and with the effect)
-are kept on the candidate either way, so a rejected candidate is reported with them.
+lowers the held-out error by more than noise explains, and neither fold on its own gets worse beyond noise
+(:data:`HELD_OUT_FOLD_T`): a term that only one half of the records bears out, such as a constant standing in
+for the mean of a slow, uncovered force over that half, is not a finding. Held-out figures (NRMSE without and
+with the effect) are kept on the candidate either way, so a rejected candidate is reported with them.
 """
 
 from __future__ import annotations
