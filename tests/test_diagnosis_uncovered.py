@@ -80,9 +80,6 @@ def test_without_the_effect_the_same_file_is_white(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 13: with grids bounded by the record instead of fixed, a Stribeck "
-                                       "(seed 1) and a cogging (seed 2) fit part of the uncovered gain variation "
-                                       "and pass the held-out check: 2 claims in 4 seeds")
 def test_larger_uncovered_effect_is_rarely_claimed(tmp_path):
     # +-5 %: catalogued terms fit part of it, mostly with impossible parameters (a negative stiction, a
     # saturation that amplifies), which are not findings; over 4 noise seeds at most one claim (the same
