@@ -253,14 +253,10 @@ def _retest_base(current: IdentifiedModel, base: IdentifiedModel, columns: dict[
                 weakest, where = t, (i, k)
         if where is None or weakest >= limit:
             break
-        coef = current.coef.copy()
-        coef[where] = 0.0
-        reduced = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=coef,
-                                  dt=current.dt, meta=current.meta)
-        try:
-            current, _, nuisances = output_error_fit(reduced, columns, dt, nuisances=nuisances, **fit.kw)
-        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        refit = _refit_without(current, [where], columns, dt, nuisances, fit, iterations=15)
+        if refit is None:
             break
+        current, nuisances = refit
         dropped.append(f"{current.states[where[0]]}: {current.terms[where[1]]}")
         present.discard((where[0], current.terms[where[1]]))
     return current, nuisances, dropped
@@ -353,9 +349,10 @@ def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: f
     rows = [i for i in dynamic if current.coef[i, k] != 0.0]
     if not rows:
         return None
-    reduced = _refit_without(current, [(i, k) for i in rows], columns, dt, nuisances, fit)
-    if reduced is None:
+    refit = _refit_without(current, [(i, k) for i in rows], columns, dt, nuisances, fit)
+    if refit is None:
         return None
+    reduced = refit[0]
     screen = OutputErrorScreen(reduced, columns, dt, **fit.kw)
 
     def without(model: IdentifiedModel, dropped: list[int]) -> float:
@@ -375,7 +372,8 @@ def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: f
         others = [j for j in rows if j != keep]
         if n_eff * math.log(1.0 + _wald_cost(current, [(j, "1") for j in others], screen.n_obs) / cost_full) < \
                 len(others) * math.log(n_eff):
-            single = _refit_without(current, [(j, k) for j in others], columns, dt, nuisances, fit)
+            refit = _refit_without(current, [(j, k) for j in others], columns, dt, nuisances, fit)
+            single = refit[0] if refit is not None else None
             # kept only if its refit bears the linearised promise out (a stalled refit would not)
             if single is not None and n_eff * math.log(_cost_of(single) / cost_full) < len(others) * math.log(n_eff):
                 current, rows = single, [keep]
@@ -426,18 +424,21 @@ def _wald_cost(model: IdentifiedModel, entries: list[tuple[int, str]], n_obs: in
 
 
 def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], columns: dict[str, np.ndarray],
-                   dt: float, nuisances: list[Nuisance], fit: _FitOptions) -> IdentifiedModel | None:
-    """`model` with the coefficients at `entries` (row, term) set to zero, refitted by output error (None if
-    the fit fails)."""
+                   dt: float, nuisances: list[Nuisance], fit: _FitOptions,
+                   iterations: int = 40) -> tuple[IdentifiedModel, list[Nuisance]] | None:
+    """`model` with the coefficients at `entries` (row, term) set to zero, refitted by output error, and the
+    nuisances refitted with it (None if the fit fails)."""
     coef = model.coef.copy()
     for entry in entries:
         coef[entry] = 0.0
     reduced = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
                               meta=model.meta)
     try:
-        return output_error_fit(reduced, columns, dt, nuisances=nuisances, iterations=40, **fit.kw)[0]
+        refitted, _, nuis = output_error_fit(reduced, columns, dt, nuisances=nuisances, iterations=iterations,
+                                             **fit.kw)
     except (DataError, np.linalg.LinAlgError, FloatingPointError):
         return None
+    return refitted, nuis
 
 
 def _bounded_first(trials: list[_Trial], n_obs: int) -> list[_Trial]:
