@@ -256,3 +256,42 @@ def test_duffing_positions_only_default_cli_path_names_the_cubic_spring(tmp_path
     found = payload["effects"][0]
     assert (found["name"], found["attached_to"]) == ("cubic_stiffness", "x"), payload["message"]
     assert found["parameters"]["k3"] == pytest.approx(K3, rel=0.10)
+
+
+# ---------------------------------------------------------------------------------------------- saturation on steps
+def stepped_mass(level: float, seed: int = 0, n: int = 4000, dt: float = 2e-3, noise: float = 0.005) -> Trajectory:
+    """m x'' + c x' + k x = clip(u, level): steps among seven command levels, of which only the largest
+    magnitude passes `level`, integrated with solve_ivp (command held over each sample)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n + 1) * dt
+    levels = np.array([-9.0, -5.0, -2.5, 0.0, 2.5, 5.0, 7.0])
+    u = np.repeat(rng.choice(levels, size=n // 200 + 1), 200)[:n + 1]
+    u[:200] = -9.0  # the clipped level surely appears
+
+    def rhs(time, s):
+        k = min(int(time / dt + 1e-9), n)
+        return [s[1], (np.clip(u[k], -level, level) - C * s[1] - K * s[0]) / M]
+
+    sol = solve_ivp(rhs, (0.0, t[-1]), [0.0, 0.0], t_eval=t, max_step=dt, rtol=1e-8, atol=1e-10)
+    x, v = sol.y
+    x = x + noise * np.ptp(x) * rng.standard_normal(x.size)
+    v = v + noise * np.ptp(v) * rng.standard_normal(v.size)
+    return Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, roles={"x": "state", "v": "state", "u": "input"})
+
+
+@pytest.mark.slow
+def test_a_saturation_seen_on_one_step_level_is_placed_by_the_inputs_own_gain():
+    """A saturation the plant sees through its input's gain (``b clip(u)``): with a free gain on the clipped
+    part, the level between the two largest commands (7 and 9) trades against that gain; tied to the input's,
+    the one clipped step pins it."""
+    from cosim.diagnose.diagnosis import diagnose
+
+    linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),
+                             coef=np.array([[1.0, 0.0, 0.0], [-C / M, -K / M, 1.0 / M]]))
+    report = diagnose(linear, stepped_mass(8.0), max_effects=1)
+    assert report.effects, report.message
+    found = report.effects[0]
+    assert (found.name, found.attached_to) == ("saturation", "u"), report.message
+    assert found.parameters["level"] == pytest.approx(8.0, rel=0.02)
+    assert found.parameters["gain_ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert report.after["nrmse_pct"] * 3 < report.before["nrmse_pct"]

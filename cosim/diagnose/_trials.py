@@ -79,6 +79,35 @@ def _with_effect(model: IdentifiedModel, cand: EffectCandidate, new_inputs: list
                            coef=coef, dt=model.dt, meta=meta)
 
 
+#: The least number of Gauss-Newton iterations of a tied input-level effect's trial fit whose start is worse than
+#: the model without it (a drifting free run: record 66 of the generalisation benchmark, a dead zone under a
+#: PID, starts at 2500 times the base's cost and is below it after 8; record 160, a saturation, at 60 times, and
+#: converges after 20).
+TIED_ITERATIONS = 25
+
+
+def _tied_start(current: IdentifiedModel, cand: EffectCandidate, tie: tuple[str, float],
+                screen: OutputErrorScreen) -> IdentifiedModel:
+    """The model with an input-level effect the plant sees through the input's own gain (its term's coefficient
+    `tie[1]` times the input's in each row), each row's gain the least-squares match of the mapped input to the
+    input force the screening's step aims at (``b u + c term``, its free coefficient `c`): the base model's
+    gain absorbed the effect (a dead zone as a lower gain), and keeping it would start far off."""
+    u, factor = tie
+    values = screen._term_values((u, *cand.terms))
+    mapped = values[:, 0] + factor * values[:, 1]
+    trial = _with_effect(current, replace(cand, coefficients=()), [])
+    coef = trial.coef.copy()
+    k_u, k_e = trial.terms.index(u), trial.terms.index(cand.terms[0])
+    for r_i, row in enumerate(cand.rows):
+        i = trial.states.index(row)
+        c = cand.coefficients[r_i] if cand.coefficients else 0.0
+        target = coef[i, k_u] * values[:, 0] + c * values[:, 1]
+        if float(mapped @ mapped) > 0:
+            coef[i, k_u] = float(target @ mapped) / float(mapped @ mapped)
+        coef[i, k_e] = factor * coef[i, k_u]
+    return replace(trial, coef=coef)
+
+
 @dataclass
 class _Trial:
     candidate: EffectCandidate
@@ -103,15 +132,21 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
             if cand.coefficients else {}
         coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
         cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
-    trial = _with_effect(current, cand, list(new_cols))
-    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma, segments=fit.segments, measured=fit.measured) > \
-            float(screen.residual @ screen.residual):
-        # the score's one linear step overshoots (a drifting free run): start the effect from zero instead
-        trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
+    tie = (placed.signals[0], effect.input_tie) if effect.input_tie is not None else None
+    if tie is not None and tie[0] in current.terms:
+        trial = _tied_start(current, cand, tie, screen)
+    else:
+        trial = _with_effect(current, cand, list(new_cols))
+    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma, segments=fit.segments,
+                     measured=fit.measured) > float(screen.residual @ screen.residual):
+        if tie is None:  # the score's one linear step overshoots (a drifting free run): start the effect from zero
+            trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
+        else:  # a tied effect has no zero to start from (its gain is the input's): it needs the steps back
+            iterations = max(iterations, TIED_ITERATIONS)
     nuis = list(nuisances)
     own = None
     if effect.nuisance is not None and not effect.integer and effect.fit_nuisance:
-        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance))
+        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance), tied_to=tie)
         nuis.append(own)
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
@@ -129,7 +164,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         return None
     cost0 = float(screen.residual @ screen.residual)
     cost1 = float(model.meta["refinement"]["cost"])
-    q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+    q = (0 if tie is not None else len(cand.terms) * len(cand.rows)) + (1 if own is not None else 0)
     if cost1 >= cost0:
         return None
     delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
@@ -207,7 +242,8 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
         if cost_reduced <= cost_full:
             pays = False
         else:
-            q = len(cand.terms) * len(cand.rows) + (1 if own is not None else 0)
+            tied = own is not None and nuisances[own].tied_to is not None
+            q = (0 if tied else len(cand.terms) * len(cand.rows)) + (1 if own is not None else 0)
             delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
                                                     columns, dt, cost_reduced, cost_full, q, fit)
             pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size

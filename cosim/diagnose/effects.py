@@ -18,7 +18,9 @@ Every effect is registered by name (:data:`EFFECTS`, :func:`register_effect`) wi
   and exports like any other). A delay cannot be written as a term: it adds a delayed copy of the input as
   a new data column (:meth:`Effect.columns`) and the model uses it in place of the input;
 * how its **physical parameters** follow from the fitted coefficients: a force or torque is the coefficient
-  divided by the row's input gain (``-c/b`` for a friction term, which opposes the motion).
+  divided by the row's input gain (``-c/b`` for a friction term, which opposes the motion). A dead zone or a
+  saturation is what the plant sees of its input, through the input's own gain: its term's coefficient is
+  tied to ``-b`` (:attr:`Effect.input_tie`; ``gain_ratio`` reports 1), so only its level is estimated.
 
 The catalogue: ``coulomb_friction``, ``viscous_asymmetry``, ``stribeck``, ``backlash``, ``deadzone``,
 ``saturation``, ``cogging``, ``gravity``, ``offset``, ``delay``, ``cubic_stiffness`` (on one position, a
@@ -203,6 +205,9 @@ class Effect:
     #: that clips rather than amplifies); an implausible fit is not a finding, however well it scores.
     plausible: Callable[[dict[str, float]], bool] | None = None
     physical: Callable[[dict[str, np.ndarray], float, Roles, Attachment], float | None] | None = None
+    #: An input-level effect the plant sees through the input's own gain: the term's coefficient in each row is
+    #: this factor times the input's (a saturation: ``b * clip(u) = b * u - b * (u - clip(u))``), not a free one.
+    input_tie: float | None = None
     #: The nuisance's range the record can show at an attachment, from its signal and the record
     #: (:mod:`~cosim.diagnose._record_band`); None from it: the effect cannot be identified there. For an effect
     #: without a nuisance, any range means "identifiable". Without a rule: the grid is `grid_fractions` of the
@@ -552,11 +557,11 @@ register_effect(Effect(
 register_effect(Effect(
     "deadzone", "dead zone on an input: small commands have no effect", "input", "width", "input",
     lambda a, v: (_clip(a.signals[0], v),), _input_level_params("width"),
-    grid_fractions=(0.01, 0.03, 0.1, 0.2, 0.4), plausible=lambda p: 0.5 <= p["gain_ratio"] <= 1.5))
+    grid_fractions=(0.01, 0.03, 0.1, 0.2, 0.4), plausible=lambda p: 0.5 <= p["gain_ratio"] <= 1.5, input_tie=-1.0))
 register_effect(Effect(
     "saturation", "saturation of an input: commands beyond a level are clipped", "input", "level", "input",
     lambda a, v: (f"{a.signals[0]}-({_clip(a.signals[0], v)})",), _input_level_params("level"),
-    grid_fractions=(0.3, 0.5, 0.7, 0.85, 0.95), plausible=lambda p: 0.5 <= p["gain_ratio"] <= 1.5))
+    grid_fractions=(0.3, 0.5, 0.7, 0.85, 0.95), plausible=lambda p: 0.5 <= p["gain_ratio"] <= 1.5, input_tie=-1.0))
 register_effect(Effect(
     "cogging", "cogging: a torque periodic in an angle (n periods per radian)", "position", "periods", "periods",
     lambda a, v: (f"sin({_num(v)}*{a.signals[0]})", f"cos({_num(v)}*{a.signals[0]})"), _periodic_params("periods"),

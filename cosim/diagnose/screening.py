@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -379,6 +379,10 @@ class Nuisance:
     make_terms: Callable[[float], tuple[str, ...]]
     value: float
     std_error: float | None = None  # set by the fit (first order, from the log-scale sensitivity)
+    #: ``(term, factor)``: in every row, the coefficient of this nuisance's (first) term is `factor` times that
+    #: row's coefficient of `term`, so it adds no free coefficient. An input's saturation or dead zone as the
+    #: plant sees it: ``b * clip(u) = b * u - b * (u - clip(u))``, the input's own gain, tied (factor -1).
+    tied_to: tuple[str, float] | None = None
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -411,7 +415,7 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     coefficients' standard errors from the final Jacobian), the standard errors as an array shaped like
     ``coef``, and the nuisances.
     """
-    current, nuis = model, [Nuisance(n.make_terms, n.value) for n in nuisances]
+    current, nuis = model, [replace(n, std_error=None) for n in nuisances]
     kw = {"estimate_x0": estimate_x0, "noise": noise, "segments": segments, "measured": measured}
     screen = OutputErrorScreen(current, columns, dt, x0=x0, **kw)
     cost = float(screen.residual @ screen.residual)
@@ -419,7 +423,9 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     fraction = 1.0  # of the Gauss-Newton step tried first: twice the last one taken (a model that needed short
     for _ in range(iterations):  # steps needs them again, and each halving costs a simulation)
         jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
-        full = _gauss_newton_step(jac, screen.residual)
+        ties = _tie_map(screen, current, nuis, jac.shape[1])
+        reduced = jac @ ties
+        full = ties @ _gauss_newton_step(reduced, screen.residual)
         if _predicted_drop(jac, full) < tolerance * cost:
             break  # converged: the step would buy less than the tolerance
         accepted = False
@@ -445,9 +451,11 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
             break
     if jac is None:
         jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
-    cov = np.linalg.pinv(jac.T @ jac) * screen.variance
+    ties = _tie_map(screen, current, nuis, jac.shape[1])
+    reduced = jac @ ties
+    cov = ties @ np.linalg.pinv(reduced.T @ reduced) @ ties.T * screen.variance
     first = screen.base.shape[1]
-    nuis = [Nuisance(nu.make_terms, nu.value, nu.value * math.sqrt(max(cov[first + j, first + j], 0.0)))
+    nuis = [replace(nu, std_error=nu.value * math.sqrt(max(cov[first + j, first + j], 0.0)))
             for j, nu in enumerate(nuis)]
     se = np.zeros_like(current.coef)
     for c, (i, term) in enumerate(screen.base_columns):
@@ -461,6 +469,24 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     fitted = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=current.coef,
                              dt=current.dt, meta=meta)
     return fitted, se, nuis
+
+
+def _tie_map(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance], width: int) -> np.ndarray:
+    """The map from the free parameters to all `width` columns of the fit's Jacobian: the identity, but for a
+    tied nuisance term (:attr:`Nuisance.tied_to`), whose coefficient in a row follows that row's free term."""
+    ties = np.eye(width)
+    index = {(i, term): c for c, (i, term) in enumerate(screen.base_columns)}
+    dropped = []
+    for nu in nuis:
+        if nu.tied_to is None:
+            continue
+        term, factor = nu.tied_to
+        for i in range(len(model.states)):
+            tied, free = index.get((i, nu.terms[0])), index.get((i, term))
+            if tied is not None and free is not None:
+                ties[tied, free] = factor
+                dropped.append(tied)
+    return np.delete(ties, dropped, axis=1) if dropped else ties
 
 
 def _gauss_newton_step(jac: np.ndarray, residual: np.ndarray) -> np.ndarray:
@@ -586,6 +612,6 @@ def _apply(model: IdentifiedModel, screen: OutputErrorScreen, step: np.ndarray,
         for old, new in zip(nu.terms, nu.make_terms(value), strict=True):
             if old in terms:
                 terms[terms.index(old)] = new
-        new_nuis.append(Nuisance(nu.make_terms, value))
+        new_nuis.append(replace(nu, value=value, std_error=None))
     return IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=coef,
                            dt=model.dt), start, new_nuis
