@@ -134,6 +134,12 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
     tie = (placed.signals[0], effect.input_tie) if effect.input_tie is not None else None
     if tie is not None and tie[0] in current.terms:
+        # the plant sees the mapped input wherever the input acts: every row with it, whatever rows scored best
+        k_u = current.terms.index(tie[0])
+        rows = tuple(s for i, s in enumerate(current.states) if current.coef[i, k_u] != 0.0)
+        screened = dict(zip(cand.rows, cand.coefficients, strict=True)) \
+            if len(cand.coefficients or ()) == len(cand.rows) else {}  # (a pruned trial's are stale)
+        cand = replace(cand, rows=rows, coefficients=tuple(screened.get(r, 0.0) for r in rows))
         trial = _tied_start(current, cand, tie, screen)
     else:
         trial = _with_effect(current, cand, list(new_cols))
@@ -463,10 +469,14 @@ def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], colum
                    dt: float, nuisances: list[Nuisance], fit: _FitOptions,
                    iterations: int = 40) -> tuple[IdentifiedModel, list[Nuisance]] | None:
     """`model` with the coefficients at `entries` (row, term) set to zero, refitted by output error, and the
-    nuisances refitted with it (None if the fit fails)."""
+    nuisances refitted with it (None if the fit fails). A term tied to a dropped one (a saturation to its
+    input's gain, :attr:`~cosim.diagnose.screening.Nuisance.tied_to`) goes with it in that row."""
     coef = model.coef.copy()
-    for entry in entries:
-        coef[entry] = 0.0
+    for i, k in entries:
+        coef[i, k] = 0.0
+        for nu in nuisances:
+            if nu.tied_to is not None and nu.tied_to[0] == model.terms[k] and nu.terms[0] in model.terms:
+                coef[i, model.terms.index(nu.terms[0])] = 0.0
     reduced = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
                               meta=model.meta)
     try:
