@@ -222,24 +222,33 @@ def _model_before_a(folder: Path, cli: dict):
 
 
 # ---------------------------------------------------------------------------------------------- one record
-def linear_equivalent(spec: dict, cli: dict, folder: Path) -> str | None:
-    """Why no model could tell the record's effect from the linear model, or None.
-
-    A saturation or dead zone acts on the input's magnitude. When the plant's input takes a single magnitude
-    (a two-level PRBS, open loop), ``clip(u, L)`` is ``(L / A) u`` and ``u - clip(u, w)`` is ``(1 - w / A) u``:
-    the effect is a change of the input gain, which the linear model absorbs exactly. Such a record can only
-    answer "no effect"; it is counted as the issue defines (a miss) and listed apart.
-    """
-    names = {e["name"] for e in spec["effects"]}
-    if not names & {"saturation", "deadzone"} or spec.get("excitation") == "closed_loop":
-        return None
+def nonlinear_part(spec: dict, cli: dict, folder: Path) -> dict[str, float]:
+    """Per rated effect, its contribution over the noise times the share of its force no linear model takes
+    up (:func:`independent_plants.nonlinear_share`, on the record's noise-free run, replayed from its written
+    commands): roughly what of it the record can show beyond a change of the linear model."""
     import pandas as pd
 
     u = pd.read_csv(folder / "train.csv")[cli["input"]].to_numpy(dtype=float)
-    peak = float(np.max(np.abs(u)))
-    magnitudes = np.unique(np.round(np.abs(u[np.abs(u) > 1e-12 * peak]) / peak, 9)) if peak > 0 else []
-    if len(magnitudes) <= 1:
-        return "the input takes one magnitude: a saturation or dead zone is a gain change"
+    share = ip.nonlinear_share(spec, ip.replay(spec, u))
+    return {e["name"]: e["ratio"] * share[e["name"]] for e in spec["effects"] if e["name"] in share}
+
+
+#: An effect whose force a linear model takes up to this share (RMS) is a linear change over the record.
+LINEAR_SHARE = 1e-3
+
+
+def linear_equivalent(spec: dict, nonlinear: dict[str, float]) -> str | None:
+    """Why no model could tell the record's effect from the linear model, or None.
+
+    When every effect is rated and a linear model takes up its whole force (a saturation or dead zone under
+    an input of one magnitude is a gain change; a Coulomb friction above every command, smoothed, a viscous
+    one), the record can only answer "no effect"; it is counted as the issue defines (a miss) and listed
+    apart.
+    """
+    if not spec["effects"] or len(nonlinear) < len(spec["effects"]):
+        return None
+    if all(nonlinear[e["name"]] <= LINEAR_SHARE * e["ratio"] for e in spec["effects"]):
+        return "a linear model takes up the whole of the effect's force over this record"
     return None
 
 
@@ -257,7 +266,8 @@ def run_record(index: int, data_dir: str, max_samples: int, paths: tuple[str, ..
         row["record"] = {k: spec[k] for k in ("samples", "rate_hz", "duration_s", "excitation", "positions_only",
                                               "noise_frac", "combined_ratio")}
         row["record"]["plant"] = spec["plant"]["kind"]
-        row["record"]["linear_equivalent"] = linear_equivalent(spec, cli, folder)
+        row["record"]["nonlinear"] = nonlinear_part(spec, cli, folder)
+        row["record"]["linear_equivalent"] = linear_equivalent(spec, row["record"]["nonlinear"])
     except Exception as exc:
         row["failures"].append({"path": "generate", "error": f"{type(exc).__name__}: {exc}",
                                 "traceback": traceback.format_exc(limit=3)})
@@ -347,7 +357,25 @@ def summarize(rows: list[dict], path: str) -> dict[str, Any]:
     overall["showable"] = {"records": len(showable),
                            "right_first_pct": _pct([bool(r.get(path, {}).get("right_first")) for r in showable]),
                            "false_claims_pct": _pct([bool(r.get(path, {}).get("false_claim")) for r in showable])}
+    overall["by_nonlinear_part"] = _by_nonlinear_part(rows, path)
     return {"per_effect": per_effect, "overall": overall}
+
+
+#: Bin edges of an effect's non-linear part over the noise (:func:`nonlinear_part`, the largest of a record's).
+NONLINEAR_BINS = (0.0, 0.5, 1.0, 2.0, 4.0, math.inf)
+
+
+def _by_nonlinear_part(rows: list[dict], path: str) -> list[dict]:
+    """Named right first and false claims per bin of the records' non-linear part (rated effects only)."""
+    out = []
+    for lo, hi in zip(NONLINEAR_BINS[:-1], NONLINEAR_BINS[1:], strict=True):
+        group = [r for r in rows if r.get("record", {}).get("nonlinear")
+                 and lo <= max(r["record"]["nonlinear"].values()) < hi]
+        res = [r.get(path, {}) for r in group]
+        out.append({"from": lo, "to": hi, "records": len(group),
+                    "right_first_pct": _pct([bool(x.get("right_first")) for x in res]),
+                    "false_claims_pct": _pct([bool(x.get("false_claim")) for x in res])})
+    return out
 
 
 def _meets(value: float, op: str, limit: float) -> bool:
@@ -387,12 +415,21 @@ def markdown(result: dict[str, Any]) -> str:
             lines.append(f"| {labels[key]} | {o[key]:.3g} | {op} {limit:g} | {'yes' if o['pass'][key] else 'NO'} |")
         if "showable" in o:
             apart = [r["index"] for r in result["rows"] if r.get("record", {}).get("linear_equivalent")]
-            lines += ["", f"Apart from the {len(apart)} records whose effect is a gain change the linear model "
-                      f"absorbs exactly (an input-level effect under an input of one magnitude: records "
+            lines += ["", f"Apart from the {len(apart)} records whose effect a linear model takes up whole over the "
+                      f"record (a saturation or dead zone under an input of one magnitude, a Coulomb friction "
+                      f"above every command: records "
                       f"{', '.join(map(str, apart)) or 'none'}), {o['showable']['records']} records: named right "
                       f"first {o['showable']['right_first_pct']:.3g} %, false claims "
                       f"{o['showable']['false_claims_pct']:.3g} %. The table and the verdicts above count every "
                       "record, as the issue does."]
+        if o.get("by_nonlinear_part"):
+            lines += ["", "By the effect's non-linear part: its contribution over the noise times the share of its "
+                      "force no linear model takes up (the record's noise-free run; offsets and delays not rated). "
+                      "Below about 1 the record shows little of it beyond a change of the linear model.", "",
+                      "| non-linear part x noise | records | named right first % | false claims % |",
+                      "| --- | --- | --- | --- |"]
+            lines += [f"| {b['from']:g}-{b['to']:g} | {b['records']} | {b['right_first_pct']:.0f} | "
+                      f"{b['false_claims_pct']:.0f} |" for b in o["by_nonlinear_part"]]
         lines.append("")
     fails = [(r["index"], f) for r in result["rows"] for f in r.get("failures", [])]
     lines += [f"## Failures ({len(fails)})", ""]
@@ -455,7 +492,8 @@ def rescore(path: Path, data_dir: Path, out: Path) -> dict[str, Any]:
         folder = data_dir / f"record_{row['index']:04d}_{result['max_samples']}"
         if "record" in row and (folder / "truth.json").exists():
             truth = json.loads((folder / "truth.json").read_text())
-            row["record"]["linear_equivalent"] = linear_equivalent(truth["spec"], truth["cli"], folder)
+            row["record"]["nonlinear"] = nonlinear_part(truth["spec"], truth["cli"], folder)
+            row["record"]["linear_equivalent"] = linear_equivalent(truth["spec"], row["record"]["nonlinear"])
     paths = [p for p in ("a", "b") if p in result["summary"]]
     result["summary"] = {p: summarize(result["rows"], p) for p in paths}
     _write(result, out)

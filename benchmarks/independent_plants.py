@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -596,6 +597,60 @@ def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES) -> Record
            "velocity_names": {plant.velocity_of[p]: (f"{p}_dot" if positions_only else plant.velocity_of[p])
                               for p in plant.positions}}
     return Record(index, spec, train, heldout, heldout_clean, cli)
+
+
+def nonlinear_share(spec: dict[str, Any], clean: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Per effect, the share (RMS) of its force that no linear model can take up, along a noise-free run.
+
+    A linear model absorbs the part of an effect's force that is linear in the states, the input and a
+    constant: a gravity ``-G sin x`` over a small swing is a spring, a Coulomb friction that never lets go
+    (``Fc`` above the input) is a viscous one, a saturation under a one-level input is a gain. That part is
+    taken out by least squares in the row the force acts on; what is left, over the force's RMS, is its
+    share. An equation-error measure (the output error of the best linear model can be smaller: the share
+    can only overstate what is identifiable). Offsets (named from the model's own constant) and delays (a
+    linear dynamic) are not rated. `clean` holds every state and the commanded input (``heldout_clean``:
+    the record's twin, the same plant, effects and kind of excitation).
+    """
+    plant = Plant(spec["plant"]["kind"], {k: v for k, v in spec["plant"].items() if k != "kind"})
+    u = np.asarray(clean[plant.input], dtype=float)
+    states = np.column_stack([np.asarray(clean[s], dtype=float) for s in plant.states])
+    regressors = np.column_stack([states, u, np.ones(len(u))])
+    out = {}
+    for e in spec["effects"]:
+        name, q = e["name"], e["params"]
+        if name in ("offset", "delay"):
+            continue
+        if name in ("deadzone", "saturation"):
+            g, _ = _input_map([e])
+            force = np.array([g(x) for x in u]) - u
+        elif name in ("backlash", "cubic_stiffness") and plant.kind == "two_mass":
+            tw = states[:, 0] - states[:, 2]
+            force = plant.p["k"] * (np.array([_dz(x, q["half_width"]) for x in tw]) - tw) \
+                if name == "backlash" else q["k3"] * tw ** 3
+        else:
+            f = _force_terms([e], "", e["row"])
+            if f is None:
+                continue
+            position = next(p for p, v in plant.velocity_of.items() if v == e["row"])
+            x, v = clean[position], clean[e["row"]]
+            force = np.array([f(a, b) for a, b in zip(x, v, strict=True)])
+        total = float(np.sqrt(np.mean(force ** 2)))
+        if total == 0.0:
+            out[name] = 0.0
+            continue
+        coef = np.linalg.lstsq(regressors, force, rcond=None)[0]
+        out[name] = float(np.sqrt(np.mean((force - regressors @ coef) ** 2))) / total
+    return out
+
+
+def replay(spec: dict[str, Any], u: np.ndarray) -> dict[str, np.ndarray]:
+    """The record's noise-free states again, from its written (exact) commands `u` replayed open loop (a
+    closed-loop record's commands came from the noise-free states, so the replay is the same run)."""
+    plant = Plant(spec["plant"]["kind"], {k: v for k, v in spec["plant"].items() if k != "kind"})
+    n = len(u) - 1
+    states, _ = simulate(plant, [{k: v for k, v in e.items() if k not in ("main", "main_value", "ratio")}
+                                 for e in spec["effects"]], spec["dt"], n, u=np.asarray(u[:n], dtype=float))
+    return {**{s: states[:, i] for i, s in enumerate(plant.states)}, plant.input: np.asarray(u, dtype=float)}
 
 
 def cosim_name(record_cli: dict, signal: str) -> str:

@@ -78,3 +78,29 @@ def test_a_record_is_the_same_from_the_same_seed(record):
     twin_input, train_input = record.heldout[ip.Plant(record.spec["plant"]["kind"], {}).input], \
         record.train[ip.Plant(record.spec["plant"]["kind"], {}).input]
     assert not np.array_equal(twin_input, train_input)  # the twin has its own excitation
+
+
+def test_replay_reproduces_the_noise_free_run(record):
+    spec = record.spec
+    clean = ip.replay(spec, record.heldout_clean[ip.Plant(spec["plant"]["kind"], {}).input])
+    for name, values in clean.items():
+        assert np.array_equal(values, record.heldout_clean[name]), name
+
+
+@pytest.mark.parametrize(("effect", "share"), [
+    # a saturation under a two-level command (+-2, level 1): a gain change, all of it linear
+    ({"name": "saturation", "params": {"level": 1.0}}, 0.0),
+    # gravity over +-0.1 rad: sin x is x to 0.2 %; over +-2 rad it is far from linear
+    ({"name": "gravity", "row": "v", "params": {"G": 1.0}}, None),
+])
+def test_nonlinear_share_of_an_effects_force(effect, share):
+    t = np.linspace(0.0, 1.0, 2001)
+    u = 2.0 * np.sign(np.sin(2 * np.pi * 3 * t))
+    spec = {"plant": {"kind": "single", "m": 1.0, "b": 1.0, "k": 1.0}, "effects": [effect]}
+    if share is not None:
+        clean = {"x": np.sin(t), "v": np.cos(t), "u": u}
+        assert ip.nonlinear_share(spec, clean)[effect["name"]] == pytest.approx(share, abs=1e-12)
+        return
+    small = ip.nonlinear_share(spec, {"x": 0.1 * np.sin(2 * np.pi * t), "v": np.cos(t), "u": u})["gravity"]
+    large = ip.nonlinear_share(spec, {"x": 2.0 * np.sin(2 * np.pi * t), "v": np.cos(t), "u": u})["gravity"]
+    assert small < 0.002 < 0.05 < large
