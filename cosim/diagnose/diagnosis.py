@@ -25,7 +25,9 @@
    Jacobian, through the row's input gain), and plots of the evidence.
 5. **Offset last**: the base model keeps a constant (without it a spring to ground stands in for an offset);
    once no effect more pays, that constant is judged as an ``offset`` candidate is (BIC, p-value, size,
-   held-out folds) and named when it earns its place (:func:`~cosim.diagnose._trials._base_offset`).
+   held-out folds) and named when it earns its place (:func:`~cosim.diagnose._trials._base_offset`), unless
+   an effect fitted without the constant does better (a force with a mean the constant stood in for:
+   :func:`_offset_rival`); the constant is then judged again beside it.
 
 This module holds the search, round after round. A round's screening and ranking are in ``_ranking``, the
 trial fits (steps 2 to 4) in ``_trials``, the candidates in :mod:`~cosim.diagnose.candidates` and the report
@@ -345,6 +347,19 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     if "offset" in names and len(accepted) < max_effects:
         # the base's own constant, judged as an effect once the rounds are over (see _base_offset)
         offset = _base_offset(current, columns, dt, nuisances, alpha, bic_margin, min_size, fit, check)
+        rival = _offset_rival(offset, names, accepted, columns, dt, nuisances, alpha, bic_margin, min_size, fit,
+                              check) if offset is not None else None
+        if rival is not None:  # a force with a mean the constant stood in for: it, not an offset
+            accepted.append(rival.candidate)
+            if rival.nuisance is not None:
+                owners.append(len(accepted) - 1)
+            current, nuisances = rival.model, rival.nuisances
+            columns.update(rival.new_columns)
+            _write_back(accepted, owners, nuisances)
+            steps.append((tuple(c.name for c in accepted), current))
+            # and the constant, judged again beside it (a record can have both)
+            offset = _base_offset(_with_constant(current, offset[0].rows, columns, dt, nuisances, fit), columns,
+                                  dt, nuisances, alpha, bic_margin, min_size, fit, check)
         if offset is not None:
             accepted.append(offset[0])
             current = offset[1]
@@ -365,6 +380,73 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
                            rejected=tuple(rejected), dropped_terms=tuple(dropped))
+
+
+def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[EffectCandidate],
+                  columns: dict[str, np.ndarray], dt: float, nuisances: list[Nuisance], alpha: float,
+                  bic_margin: float, min_size: float, fit: _FitOptions, check: HeldOutCheck | None):
+    """An effect that does, without the base's constant, better than the constant does: the trial (or None).
+
+    While the base keeps its constant, a force with a mean (a viscous asymmetry's ``|v|``, a cogging over part
+    of a period) is screened against a model whose constant has already taken that mean: what is left of it
+    may fall below the size floor while the constant then passes as an ``offset``. So before an offset is
+    named, the catalogue is screened and the leading candidates fitted on the model without the constant
+    (`offset`'s third item); the best, if its BIC change beats the offset's and it passes the held-out check,
+    is named instead.
+    """
+    cand, with_offset, reduced = offset
+    try:
+        screen = OutputErrorScreen(reduced, dict(columns), dt, **fit.kw)
+    except DataError:
+        return None
+
+    def beats_offset(trial) -> bool:
+        # by BIC against the model with the offset, on the actual costs: the offset's own BIC change counts
+        # the cost without it to first order when the refit without it stalls, which the rival's does not
+        q = (0 if trial.nuisance is not None and trial.nuisance.tied_to is not None
+             else len(trial.candidate.terms) * len(trial.candidate.rows)) + (trial.nuisance is not None)
+        n_eff = screen.n_obs / trial.candidate.explained.get("correlation_factor", 1.0)
+        return trial.candidate.significant and n_eff * math.log(_cost_of(trial.model) / _cost_of(with_offset)) \
+            + (q - len(cand.rows)) * math.log(n_eff) < 0.0
+
+    ranking = _round(screen, [n for n in names if n != "offset"], alpha, bic_margin, min_size,
+                     taken=[(c.name, c.attached_to) for c in accepted])
+    trials = [_fit_with(reduced, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                        iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
+    trials = sorted((t for t in trials if t is not None and t.candidate.significant),
+                    key=lambda t: t.candidate.delta_bic)
+    for trial in trials[:HELD_OUT_TRIES]:
+        trial = _fit_with(reduced, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin, min_size,
+                          fit) or trial
+        if not beats_offset(trial):
+            continue
+        if check is not None:
+            evidence = check.judge(reduced, trial.model, {**columns, **trial.new_columns})
+            trial.candidate = replace(trial.candidate,
+                                      explained={**trial.candidate.explained, **evidence.as_explained()})
+            if not evidence.passed:
+                continue
+        return trial
+    return None
+
+
+def _cost_of(model: IdentifiedModel) -> float:
+    return float(model.meta["refinement"]["cost"])
+
+
+def _with_constant(model: IdentifiedModel, rows: Sequence[str], columns: dict[str, np.ndarray], dt: float,
+                   nuisances: list[Nuisance], fit: _FitOptions) -> IdentifiedModel:
+    """`model` with a constant in `rows` again, refitted (the model as it was if the fit fails)."""
+    k = model.terms.index("1")
+    coef = model.coef.copy()
+    for row in rows:
+        coef[model.states.index(row), k] = coef[model.states.index(row), k] or 1e-12
+    restored = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef,
+                               dt=model.dt, meta=model.meta)
+    try:
+        return output_error_fit(restored, columns, dt, nuisances=nuisances, **fit.kw)[0]
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return model
 
 
 def _first_x0(x0: np.ndarray) -> np.ndarray:
