@@ -66,14 +66,12 @@ def _run(parameters, seed, excitation, duration):
                  marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: backlash named, half-width "
                                          "5.95e-5 (+19 %), free-run NRMSE 5.51 -> 2.61 % only")),
     ({"Toffset": 100.0}, "offset", "constant", "offset_omega_m", 100.0, 0.10, MULTISINE, 2.0),
-    pytest.param({"Tcog": 150.0}, "cogging", "theta_m", "amplitude_omega_m", 150.0, 0.10, SLEW, 3.0,
-                 marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: the linear model identified "
-                                         "on the multisine runs at 130 % NRMSE on the slew; a viscous asymmetry "
-                                         "is named first, cogging second")),
+    # the linear model identified on the multisine runs at 130 % NRMSE on the slew
+    ({"Tcog": 150.0}, "cogging", "theta_m", "amplitude_omega_m", 150.0, 0.10, SLEW, 3.0),
     pytest.param({"mgl": 500.0}, "gravity", "theta_L", "amplitude_omega_L", 500.0, 0.10, SLEW, 3.0,
                  marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: gravity on theta_m wins the "
-                                         "round in-sample but fails the held-out check (17.8 -> 48.5 %); a cubic "
-                                         "spring on theta_m is named instead")),
+                                         "round in-sample but fails the held-out check (17.8 -> 48.5 %); nothing "
+                                         "is named")),
 ])
 def test_the_undeclared_effect_ranks_first_with_its_parameter(parameters, effect, attached, key, true, tolerance,
                                                               excitation, duration):
