@@ -62,6 +62,7 @@ from ._free_run import (
     measured_weights,
     noise_level,
 )
+from ._nuisance import Nuisance, _apply, _nuisance_columns, _tie_map
 from ._sensitivity import Propagator
 from .effects import Attachment, Effect, Roles
 
@@ -369,26 +370,6 @@ def effect_specs(effect: Effect, attachment: Attachment, value: float | None,
     return [(terms, rows) for rows in row_subsets([r for r in attachment.rows if r in screen.roles.dynamic_rows])]
 
 
-@dataclass
-class Nuisance:
-    """A placed effect's nuisance parameter that the output-error fit estimates with the coefficients.
-
-    `make_terms(value)` writes the effect's terms for a value; the model holds ``make_terms(value)``.
-    """
-
-    make_terms: Callable[[float], tuple[str, ...]]
-    value: float
-    std_error: float | None = None  # set by the fit (first order, from the log-scale sensitivity)
-    #: ``(term, factor)``: in every row, the coefficient of this nuisance's (first) term is `factor` times that
-    #: row's coefficient of `term`, so it adds no free coefficient. An input's saturation or dead zone as the
-    #: plant sees it: ``b * clip(u) = b * u - b * (u - clip(u))``, the input's own gain, tied (factor -1).
-    tied_to: tuple[str, float] | None = None
-
-    @property
-    def terms(self) -> tuple[str, ...]:
-        return self.make_terms(self.value)
-
-
 def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], dt: float, *,
                      x0: Sequence[float] | None = None, nuisances: Sequence[Nuisance] = (), iterations: int = 15,
                      tolerance: float = 1e-7, estimate_x0: bool = True, noise: Mapping[str, float] | None = None,
@@ -471,24 +452,6 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     return fitted, se, nuis
 
 
-def _tie_map(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance], width: int) -> np.ndarray:
-    """The map from the free parameters to all `width` columns of the fit's Jacobian: the identity, but for a
-    tied nuisance term (:attr:`Nuisance.tied_to`), whose coefficient in a row follows that row's free term."""
-    ties = np.eye(width)
-    index = {(i, term): c for c, (i, term) in enumerate(screen.base_columns)}
-    dropped = []
-    for nu in nuis:
-        if nu.tied_to is None:
-            continue
-        term, factor = nu.tied_to
-        for i in range(len(model.states)):
-            tied, free = index.get((i, nu.terms[0])), index.get((i, term))
-            if tied is not None and free is not None:
-                ties[tied, free] = factor
-                dropped.append(tied)
-    return np.delete(ties, dropped, axis=1) if dropped else ties
-
-
 def _gauss_newton_step(jac: np.ndarray, residual: np.ndarray) -> np.ndarray:
     """The least-squares step (QR with column pivoting: rank-deficient columns get no step)."""
     return linalg.lstsq(jac, residual, lapack_driver="gelsy", check_finite=False)[0]
@@ -555,63 +518,3 @@ def initial_state_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray],
         if improvement < tolerance:
             break
     return InitialStateFit(screen.x0, screen.residual.reshape(-1, len(model.states)), cost, screen.sigma)
-
-
-#: A nuisance's terms carry a force when it is above this share of their row's RMS force (see
-#: :func:`_nuisance_columns`).
-LIVE_FORCE = 1e-9
-
-
-def _nuisance_columns(screen: OutputErrorScreen, model: IdentifiedModel, nuis: Sequence[Nuisance]) -> list:
-    """Sensitivity of the free run to log(value) of each nuisance parameter (one integration for all).
-
-    A nuisance whose terms carry no force yet (an effect started from zero coefficients: its force is below
-    :data:`LIVE_FORCE` of its row's) has no sensitivity: its column is zero, so the step leaves it where it is
-    until the coefficients have grown. Its finite-difference column would be round-off, and a least-squares
-    step on it arbitrarily large."""
-    if not nuis:
-        return []
-    h = 0.02
-    n = len(model.states)
-    forcing = np.zeros((len(screen.x_sim) - 1, n, len(nuis)))
-    row_rms = None
-    for j, nu in enumerate(nuis):
-        present = nu.terms
-        up, down = nu.make_terms(nu.value * math.exp(h)), nu.make_terms(nu.value * math.exp(-h))
-        f_up, f_down = screen._term_values(up), screen._term_values(down)
-        own = np.zeros((len(f_up), n))
-        for t_i, term in enumerate(present):
-            if term not in model.terms:
-                continue
-            k = model.terms.index(term)
-            for i in range(n):
-                if model.coef[i, k] != 0.0:
-                    forcing[:, i, j] += model.coef[i, k] * (f_up[:, t_i] - f_down[:, t_i]) / (2 * h)
-                    own[:, i] += model.coef[i, k] * (f_up[:, t_i] + f_down[:, t_i]) / 2
-        if row_rms is None:
-            row_rms = np.sqrt(np.mean((screen._term_values(model.terms) @ model.coef.T) ** 2, axis=0))
-        live = np.sqrt(np.mean(own ** 2, axis=0)) > LIVE_FORCE * row_rms
-        if not np.any(live & (row_rms > 0)):
-            forcing[:, :, j] = 0.0
-    sens = screen._flatten_owned(screen._integrate(forcing))
-    return [sens[:, j] for j in range(len(nuis))]
-
-
-def _apply(model: IdentifiedModel, screen: OutputErrorScreen, step: np.ndarray,
-           nuis: Sequence[Nuisance]) -> tuple[IdentifiedModel, np.ndarray, list[Nuisance]]:
-    coef = model.coef.copy()
-    nb = len(screen.base_columns)
-    for c, (i, term) in enumerate(screen.base_columns):
-        coef[i, model.terms.index(term)] += step[c]
-    n = screen.x0.size if screen.estimate_x0 else 0
-    start = screen.x0 + step[nb:nb + n].reshape(screen.x0.shape) if n else screen.x0
-    terms = list(model.terms)
-    new_nuis = []
-    for j, nu in enumerate(nuis):
-        value = nu.value * math.exp(float(np.clip(step[nb + n + j], -1.0, 1.0)))
-        for old, new in zip(nu.terms, nu.make_terms(value), strict=True):
-            if old in terms:
-                terms[terms.index(old)] = new
-        new_nuis.append(replace(nu, value=value, std_error=None))
-    return IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=coef,
-                           dt=model.dt), start, new_nuis
