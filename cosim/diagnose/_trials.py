@@ -6,8 +6,10 @@ actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio 
 
 * ``_fit_with`` - the model refitted with one candidate added: rows where the effect is not clearly non-zero
   are pruned (``_prune_rows``), a nuisance the data pin only through a product is moved to its physical value
-  (``_physical_nuisance``);
+  (``_physical_nuisance``); a dead zone or saturation starts tied to its input's gain (``_tied_start``);
 * ``_drop_redundant`` - the backward check: an effect found earlier goes when a later one makes it redundant;
+* ``_retest_base`` - the base model's terms re-tested once an effect is in (a removal whose refit runs away
+  does not stand);
 * ``_final_parameters`` - an accepted effect's physical parameters and standard errors from the final model;
 * ``_bounded_first`` - the order of a round's trials, gravity before a softening spring to ground it ties with;
 * ``_base_offset`` - the base model's constant, judged as an ``offset`` effect once the rounds are over;
