@@ -110,6 +110,13 @@ def _tied_start(current: IdentifiedModel, cand: EffectCandidate, tie: tuple[str,
     return replace(trial, coef=coef)
 
 
+def _parameters(cand: EffectCandidate, own: Nuisance | None) -> int:
+    """How many parameters an effect adds: its coefficients (none when tied to the input's gain) and its own
+    nuisance."""
+    tied = own is not None and own.tied_to is not None
+    return (0 if tied else len(cand.terms) * len(cand.rows)) + (own is not None)
+
+
 @dataclass
 class _Trial:
     candidate: EffectCandidate
@@ -172,7 +179,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         return None
     cost0 = float(screen.residual @ screen.residual)
     cost1 = float(model.meta["refinement"]["cost"])
-    q = (0 if tie is not None else len(cand.terms) * len(cand.rows)) + (1 if own is not None else 0)
+    q = _parameters(cand, own)
     if cost1 >= cost0:
         return None
     delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
@@ -250,8 +257,7 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
         if cost_reduced <= cost_full:
             pays = False
         else:
-            tied = own is not None and nuisances[own].tied_to is not None
-            q = (0 if tied else len(cand.terms) * len(cand.rows)) + (1 if own is not None else 0)
+            q = _parameters(cand, nuisances[own] if own is not None else None)
             delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
                                                     columns, dt, cost_reduced, cost_full, q, fit)
             pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size

@@ -74,11 +74,13 @@ from ._ranking import _round, check_effect_selection
 from ._trials import (
     _base_offset,
     _bounded_first,
+    _cost_of,
     _drop_redundant,
     _final_parameters,
     _fit_with,
     _FitOptions,
     _fitted_x0,
+    _parameters,
     _retest_base,
     _sigma,
 )
@@ -318,13 +320,9 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         for trial in trials[:HELD_OUT_TRIES]:
             trial = _fit_with(current, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin,
                               min_size, fit) or trial  # fitted to convergence
-            if check is not None:
-                evidence = check.judge(current, trial.model, {**columns, **trial.new_columns})
-                trial.candidate = replace(trial.candidate,
-                                          explained={**trial.candidate.explained, **evidence.as_explained()})
-                if not evidence.passed:
-                    rejected.append(_final_parameters(trial.candidate, trial.model))
-                    continue
+            if not _held_out(check, current, trial, columns):
+                rejected.append(_final_parameters(trial.candidate, trial.model))
+                continue
             best = trial
             break
         if best is None:
@@ -391,8 +389,8 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
     of a period) is screened against a model whose constant has already taken that mean: what is left of it
     may fall below the size floor while the constant then passes as an ``offset``. So before an offset is
     named, the catalogue is screened and the leading candidates fitted on the model without the constant
-    (`offset`'s third item); the best, if its BIC change beats the offset's and it passes the held-out check,
-    is named instead.
+    (`offset`'s third item); the best that beats the model with the offset by BIC (on the actual costs) and
+    passes the held-out check is named instead.
     """
     cand, with_offset, reduced = offset
     try:
@@ -403,8 +401,7 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
     def beats_offset(trial) -> bool:
         # by BIC against the model with the offset, on the actual costs: the offset's own BIC change counts
         # the cost without it to first order when the refit without it stalls, which the rival's does not
-        q = (0 if trial.nuisance is not None and trial.nuisance.tied_to is not None
-             else len(trial.candidate.terms) * len(trial.candidate.rows)) + (trial.nuisance is not None)
+        q = _parameters(trial.candidate, trial.nuisance)
         n_eff = screen.n_obs / trial.candidate.explained.get("correlation_factor", 1.0)
         return trial.candidate.significant and n_eff * math.log(_cost_of(trial.model) / _cost_of(with_offset)) \
             + (q - len(cand.rows)) * math.log(n_eff) < 0.0
@@ -418,20 +415,19 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
     for trial in trials[:HELD_OUT_TRIES]:
         trial = _fit_with(reduced, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin, min_size,
                           fit) or trial
-        if not beats_offset(trial):
-            continue
-        if check is not None:
-            evidence = check.judge(reduced, trial.model, {**columns, **trial.new_columns})
-            trial.candidate = replace(trial.candidate,
-                                      explained={**trial.candidate.explained, **evidence.as_explained()})
-            if not evidence.passed:
-                continue
-        return trial
+        if beats_offset(trial) and _held_out(check, reduced, trial, columns):
+            return trial
     return None
 
 
-def _cost_of(model: IdentifiedModel) -> float:
-    return float(model.meta["refinement"]["cost"])
+def _held_out(check: HeldOutCheck | None, base: IdentifiedModel, trial, columns: dict[str, np.ndarray]) -> bool:
+    """Whether `trial` lowers the held-out error against `base` (always true without a check); the check's
+    figures go onto the trial's candidate."""
+    if check is None:
+        return True
+    evidence = check.judge(base, trial.model, {**columns, **trial.new_columns})
+    trial.candidate = replace(trial.candidate, explained={**trial.candidate.explained, **evidence.as_explained()})
+    return evidence.passed
 
 
 def _with_constant(model: IdentifiedModel, rows: Sequence[str], columns: dict[str, np.ndarray], dt: float,
