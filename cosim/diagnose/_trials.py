@@ -141,8 +141,9 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
             if cand.coefficients else {}
         coefficients = np.column_stack([start.get(t, np.zeros(len(cand.rows))) for t in fit_terms]).reshape(-1)
         cand = replace(cand, terms=fit_terms, coefficients=tuple(float(c) for c in coefficients))
-    tie = (placed.signals[0], effect.input_tie) if effect.input_tie is not None else None
-    if tie is not None and tie[0] in current.terms:
+    tie = (placed.signals[0], effect.input_tie) \
+        if effect.input_tie is not None and placed.signals[0] in current.terms else None
+    if tie is not None:
         # the plant sees the mapped input wherever the input acts: every row with it, whatever rows scored best
         k_u = current.terms.index(tie[0])
         rows = tuple(s for i, s in enumerate(current.states) if current.coef[i, k_u] != 0.0)
