@@ -134,3 +134,14 @@ def test_sindyc_kinematics_off_and_given():
     assert SINDYc(kinematics="none").get_params()["kinematics"] == "none"
     with pytest.raises(InvalidSettingError, match="kinematics must be 'auto', 'none'"):
         SINDYc(kinematics="sometimes")
+
+
+def test_records_of_unequal_lengths():
+    """Separate experiments rarely have the same length: the pairs are found over records of 2001, 1500 and
+    801 samples alike (a list of such arrays once failed inside numpy before any test ran)."""
+    x = two_mass(500, f_res=1.0, noise=0.01)
+    records = [x[:2001], x[:1500], x[200:1001]]
+    pairs = detect_kinematics(["s1", "s2", "s3", "s4"], [r[:, [2, 0, 3, 1]] for r in records], 1 / 500)
+    assert sorted((p.position, p.velocity) for p in pairs) == [("s1", "s3"), ("s2", "s4")]
+    # rows of samples given as lists are still one record
+    assert len(detect_kinematics(NAMES, x.tolist(), 1 / 500)) == 2

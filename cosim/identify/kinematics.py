@@ -197,8 +197,9 @@ def _test(p_runs: Sequence[np.ndarray], v_runs: Sequence[np.ndarray], dt: float,
 
 
 def _as_runs(names: Sequence[str], data: Any) -> list[np.ndarray]:
-    items = [data] if isinstance(data, np.ndarray) or (np.ndim(data) == 2 and len(data) and
-                                                       np.ndim(data[0]) == 1) else list(data)
+    items = [data] if isinstance(data, np.ndarray) else list(data)
+    if items and not isinstance(data, np.ndarray) and np.ndim(items[0]) == 1:
+        items = [items]  # rows of samples: one record (np.ndim of the whole would fail on records of unequal lengths)
     runs = []
     for item in items:
         x = np.asarray(item, dtype=float)
