@@ -6,7 +6,9 @@ actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio 
 
 * ``_fit_with`` - the model refitted with one candidate added: rows where the effect is not clearly non-zero
   are pruned (``_prune_rows``), a nuisance the data pin only through a product is moved to its physical value
-  (``_physical_nuisance``); a dead zone or saturation starts tied to its input's gain (``_tied_start``);
+  (``_physical_nuisance``); a dead zone or saturation starts tied to its input's gain (``_tied_start``); an
+  effect that linearises to base terms (gravity: a spring and a constant) is also fitted without them
+  (``_without_absorbed``), BIC choosing;
 * ``_drop_redundant`` - the backward check: an effect found earlier goes when a later one makes it redundant;
 * ``_retest_base`` - the base model's terms re-tested once an effect is in (a removal whose refit runs away
   does not stand);
@@ -110,6 +112,34 @@ def _tied_start(current: IdentifiedModel, cand: EffectCandidate, tie: tuple[str,
     return replace(trial, coef=coef)
 
 
+def _without_absorbed(trial: IdentifiedModel, cand: EffectCandidate, absorbed: tuple[str, ...],
+                      screen: OutputErrorScreen) -> tuple[IdentifiedModel, int] | None:
+    """`trial` without the base terms an effect's linearisation is (`absorbed`, see :attr:`Effect.absorbs`), in
+    the effect's rows, their force moved into the effect's terms (the least-squares match along the base
+    model's free run); and how many coefficients that removed. None if no row has them.
+
+    Gravity on a swing of a radian: the base model took it up as a spring to ground and a constant. Kept beside
+    the sine, the two trade off with it over the record and the trial pays for parameters the plant does not
+    have (record 32: a spring of +0.16 beside a sine of -0.50, where the plant has no spring and -0.34).
+    """
+    have = [t for t in absorbed if t in trial.terms]
+    if not have:
+        return None
+    k_a = [trial.terms.index(t) for t in have]
+    k_e = [trial.terms.index(t) for t in cand.terms]
+    old, new = screen._term_values(have), screen._term_values(cand.terms)
+    coef, removed = trial.coef.copy(), 0
+    for row in cand.rows:
+        i = trial.states.index(row)
+        if not np.any(coef[i, k_a]):
+            continue
+        force = old @ coef[i, k_a] + new @ coef[i, k_e]
+        coef[i, k_e] = np.linalg.lstsq(new, force, rcond=None)[0]
+        removed += int(np.count_nonzero(coef[i, k_a]))
+        coef[i, k_a] = 0.0
+    return (replace(trial, coef=coef), removed) if removed else None
+
+
 def _parameters(cand: EffectCandidate, own: Nuisance | None) -> int:
     """How many parameters an effect adds: its coefficients (none when tied to the input's gain) and its own
     nuisance."""
@@ -166,6 +196,18 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         nuis.append(own)
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
+        freed = 0
+        absorbed = effect.absorbs(placed) if effect.absorbs is not None else ()
+        best = screen.n_obs * math.log(model.meta["refinement"]["cost"])
+        # the effect in place of the terms it linearises to (all, or each alone), if BIC prefers it
+        for terms in ([absorbed, *[(t,) for t in absorbed]] if len(absorbed) > 1 else [absorbed] * bool(absorbed)):
+            alt = _without_absorbed(trial, cand, terms, screen)
+            if alt is None:
+                continue
+            other = output_error_fit(alt[0], cols, dt, nuisances=nuis, iterations=40, **fit.kw)
+            score = screen.n_obs * math.log(other[0].meta["refinement"]["cost"]) - alt[1] * math.log(screen.n_obs)
+            if score < best:
+                (model, se, nuis), freed, best = other, alt[1], score
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
         if effect.physical is not None:
@@ -180,7 +222,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         return None
     cost0 = float(screen.residual @ screen.residual)
     cost1 = float(model.meta["refinement"]["cost"])
-    q = _parameters(cand, own)
+    q = _parameters(cand, own) - freed
     if cost1 >= cost0:
         return None
     delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
@@ -203,7 +245,7 @@ def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[
     n_eff = screen.n_obs / factor
     delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
     variance = factor * cost1 / max(screen.n_obs - screen.base.shape[1] - q, 1)
-    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, q))
+    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, max(q, 1)))
     size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
     return delta_bic, p_value, size, factor
 

@@ -208,6 +208,10 @@ class Effect:
     #: An input-level effect the plant sees through the input's own gain: the term's coefficient in each row is
     #: this factor times the input's (a saturation: ``b * clip(u) = b * u - b * (u - clip(u))``), not a free one.
     input_tie: float | None = None
+    #: The base model's terms the effect's linearisation is, at an attachment (gravity's ``sin x`` over a small
+    #: swing: a spring to ground ``x`` and a constant ``1``): the trial also starts with them moved into the
+    #: effect's terms, since a fit that keeps them only slides along the valley where they trade off.
+    absorbs: Callable[[Attachment], tuple[str, ...]] | None = None
     #: The nuisance's range the record can show at an attachment, from its signal and the record
     #: (:mod:`~cosim.diagnose._record_band`); None from it: the effect cannot be identified there. For an effect
     #: without a nuisance, any range means "identifiable". Without a rule: the grid is `grid_fractions` of the
@@ -569,7 +573,8 @@ register_effect(Effect(
 register_effect(Effect(
     "gravity", "gravity: a torque proportional to the sine of an angle (an unbalanced load)", "position", None, "",
     lambda a, v: (f"sin({a.signals[0]})", f"cos({a.signals[0]})"), _periodic_params("periods"),
-    span=lambda p, band, _: (0.0, math.inf) if rb.gravity_usable(p, band) else None))
+    span=lambda p, band, _: (0.0, math.inf) if rb.gravity_usable(p, band) else None,
+    absorbs=lambda a: (a.signals[0], "1")))
 register_effect(Effect(
     "offset", "a constant force or torque (offset, unbalance, amplifier bias)", "none", None, "",
     lambda a, v: ("1",), _offset_params))
