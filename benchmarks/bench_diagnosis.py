@@ -8,12 +8,12 @@ torque: the record used until 2026-11-25 was calibrated to 15x the noise, which 
 against a peak torque of 0.04 N m; the plant never moved, the record was noise, and the diagnosis (rightly)
 found nothing, fast. Each run also reports what it named, against the truth.
 
-Each run is a fresh process that reads the CSV, identifies a linear SINDYc model as ``cosim diagnose`` does without ``--model`` (linear library with a constant, no threshold,
-output-error refinement; kinematic rows theta_m' = omega_m, theta_L' = omega_L given, so that velocity
-effects can attach), timed separately (a cosim that refuses the linear model as unstable is asked again with
-allow_unstable=True, and the run says so), then times ``cosim.diagnose.diagnosis.diagnose(model, traj)``.
-``--compare OTHER/bin/python`` runs another environment (an older cosim) in the same interleaved rounds and
-reports the ratio. Target of the issue: median <= 10 s on 2 cores.
+Each run is a fresh process that reads the CSV, identifies a linear SINDYc model as ``cosim diagnose`` does without
+``--model`` (linear library with a constant, no threshold, output-error refinement; kinematic rows theta_m' =
+omega_m, theta_L' = omega_L given, so that velocity effects can attach), timed separately (a cosim that refuses the
+linear model as unstable is asked again with allow_unstable=True, and the run says so), then times
+``cosim.diagnose.diagnosis.diagnose(model, traj)``. ``--compare OTHER/bin/python`` runs another environment (an
+older cosim) in the same interleaved rounds and reports the ratio. Target of the issue: median <= 10 s on 2 cores.
 
 Results: benchmarks/results/diagnosis_time.json and .md.
 

@@ -385,7 +385,7 @@ class SINDYc:
             meta["x0_known"] = [v.tolist() for v in known_x0]
         if self.refine == "output_error":
             starts = _starts(model, features, targets, free_rows, n_eff, noise_var, ee_threshold, self.ridge,
-                             sparse.coef_scale)
+                             sparse.coef_scale, runs=runs, dt=dt, kin=kin)
             model = _refine(starts, runs, dt, kin, sparse.coef_scale, meta, known_x0,
                             refine_options=self.refine_options, refine_initial_state=self.refine_initial_state,
                             prune=self.threshold == "auto", prefer_stable=not self.allow_unstable)
