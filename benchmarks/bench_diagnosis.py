@@ -211,6 +211,11 @@ def _markdown(result: dict) -> str:
         error = (f", Fc {100 * abs(coulomb[0]['parameters']['Fc'] / rec['Fc'] - 1):.1f} % off" if coulomb else "")
         lines.append(f"\n{label}: named {verdict}{error} "
                      f"(truth: coulomb_friction on omega_m, Fc = {rec['Fc']:.4g} N m).")
+        each = ["; ".join(f"{e['name']} on {e['attached_to']}" for e in r["effects"]) or "nothing"
+                for r in result["runs"][label] if r["ok"]]
+        if len(set(each)) > 1:
+            lines.append("The runs did not agree (same data, same process each time): "
+                         + " | ".join(f"run {i + 1}: {e}" for i, e in enumerate(each)) + ".")
     if errors:
         lines += ["", "Errors:"] + [f"- {e}" for e in sorted(errors)]
     lines.append(f"\nPython {result['python']}, {result['cpus']} CPUs.\n")

@@ -78,8 +78,10 @@ The steps of a fit
    simulation and exact Jacobian for linear models, horizon continuation). This removes the bias equation
    error has with noisy states. A multi-start (:func:`cosim.identify._refinement._refine`): the
    noise-compensated and the uncompensated equation-error fits are each refined with and without the
-   continuation prior, the least free-run cost wins (stopping once one reaches the white-noise floor);
-   ``model_.meta["multistart"]`` records every run's cost and the winner.
+   continuation prior, then (with pinned kinematics) once a fit that takes positions from the integrals of
+   their velocities (:mod:`cosim.identify._velocity_integral`: a stiff shaft's twist below its position
+   noise keeps its spring there); the least free-run cost wins (stopping once one reaches the white-noise
+   floor); ``model_.meta["multistart"]`` records every run's cost and the winner.
 
 Positions only: ``velocities={"omega_m": "theta_m"}`` derives the velocity state ``omega_m`` from the
 measured position ``theta_m`` (``velocity_method="auto"``: a cubic Savitzky-Golay derivative whose window has
