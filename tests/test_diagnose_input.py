@@ -91,3 +91,39 @@ def test_api_load_data_then_diagnose_refuses_bad_input(files, case, error, fragm
     with pytest.raises(error, match=fragment):
         data = load_data(files[case], columns=["x", "v", "u"], roles={"x": "state", "v": "state", "u": "input"})
         diagnose(MODEL, data)
+
+
+def test_an_effect_refitted_out_of_range_is_dropped():
+    """A delay whose taps the later refits left with a centroid of minus hundreds of samples (seen on the
+    record of benchmarks/bench_diagnosis.py: -115) is no finding: _drop_implausible removes it, refits, and
+    reports it as rejected with ``plausible`` False; a plausible one stays."""
+    from cosim.diagnose._trials import _FitOptions
+    from cosim.diagnose.candidates import EffectCandidate
+    from cosim.diagnose.diagnosis import _drop_implausible
+    from cosim.diagnose.effects import delayed_name
+    from cosim.identify.model import IdentifiedModel
+
+    data = record(3000)
+    columns = {k: v for k, v in data.items() if k != "t"}
+    taps = (delayed_name("u", 3), delayed_name("u", 4))
+    for k, name in zip((3, 4), taps, strict=True):
+        columns[name] = np.concatenate([np.full(k, data["u"][0]), data["u"][:len(data["u"]) - k]])
+    fit = _FitOptions(estimate_x0=True, noise=None)
+    delay = EffectCandidate("delay", "u", ("v",), 3.0, taps, -100.0, 1e-9, {"size": 0.01}, True)
+
+    def model(weights):
+        return IdentifiedModel(states=("x", "v"), inputs=("u", *taps), terms=("v", "x", "u", *taps),
+                               coef=np.array([[1.0, 0.0, 0.0, 0.0, 0.0], [-3.0, -20.0, *weights]]), dt=1e-3,
+                               meta={"x0": [[0.0, 0.0]], "refinement": {"cost": 1.0}})
+
+    # the input's gain 1.0 split as 10 - 8.5 - 0.5: centroid (3 * -8.5 + 4 * -0.5) / 1.0 = -27.5 samples
+    current, kept, owners, _, gone = _drop_implausible(model((10.0, -8.5, -0.5)), [delay], [], [], columns,
+                                                       1e-3, fit)
+    assert kept == [] and [c.name for c in gone] == ["delay"] and gone[0].explained["plausible"] is False
+    assert gone[0].parameters["delay_samples"] == pytest.approx(-27.5)
+    assert not any(t in current.terms for t in taps)
+    assert current.coef[1, current.terms.index("u")] == pytest.approx(1.0, rel=1e-3)  # the refit without it
+    # 0.2 + 0.6 + 0.2 of the gain at 0, 3 and 4 samples: centroid 2.6, plausible, kept untouched
+    plausible = model((0.2, 0.6, 0.2))
+    current, kept, _, _, gone = _drop_implausible(plausible, [delay], [], [], columns, 1e-3, fit)
+    assert kept == [delay] and gone == [] and current is plausible

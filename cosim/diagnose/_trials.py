@@ -278,6 +278,21 @@ def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Ef
     return model, se, nuis, cand
 
 
+def _remove_effect(current: IdentifiedModel, cand: EffectCandidate, own: int | None, nuisances: list[Nuisance],
+                   columns: dict[str, np.ndarray], dt: float, fit: _FitOptions):
+    """The model without `cand`'s terms (and its nuisance, index `own`), refitted; None if the refit fails."""
+    keep = [k for k in range(len(current.terms)) if current.terms[k] not in cand.terms]
+    rest = [nu for k, nu in enumerate(nuisances) if k != own]
+    reduced = IdentifiedModel(states=current.states, inputs=current.inputs,
+                              terms=tuple(current.terms[k] for k in keep), coef=current.coef[:, keep],
+                              dt=current.dt, meta=current.meta)
+    try:
+        reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40, **fit.kw)
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return None
+    return reduced, rest
+
+
 def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
                     nuisances: list[Nuisance], columns: dict[str, np.ndarray], dt: float, alpha: float,
                     bic_margin: float, min_size: float, fit: _FitOptions):
@@ -285,16 +300,11 @@ def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], o
     significant rise of the output error (the same test as for adding it), the effect goes."""
     for j in range(len(accepted) - 2, -1, -1):
         cand = accepted[j]
-        keep = [k for k in range(len(current.terms)) if current.terms[k] not in cand.terms]
         own = owners.index(j) if j in owners else None
-        rest = [nu for k, nu in enumerate(nuisances) if k != own]
-        reduced = IdentifiedModel(states=current.states, inputs=current.inputs,
-                                  terms=tuple(current.terms[k] for k in keep), coef=current.coef[:, keep],
-                                  dt=current.dt, meta=current.meta)
-        try:
-            reduced, _, rest = output_error_fit(reduced, columns, dt, nuisances=rest, iterations=40, **fit.kw)
-        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        removed = _remove_effect(current, cand, own, nuisances, columns, dt, fit)
+        if removed is None:
             continue
+        reduced, rest = removed
         cost_full = float(current.meta["refinement"]["cost"])
         cost_reduced = float(reduced.meta["refinement"]["cost"])
         if cost_reduced <= cost_full:

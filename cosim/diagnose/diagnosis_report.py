@@ -162,8 +162,9 @@ class DiagnosisReport:
             {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
             caption="free-run simulation against the data; means over the states")
         if self.rejected:
-            report.add_table("Rejected: better in-sample, not on held-out data", [
+            report.add_table("Rejected: better in-sample, not on held-out data (or refitted out of range)", [
                 {"effect": c.name, "attached to": c.attached_to,
+                 "plausible": bool(c.explained.get("plausible", True)),
                  "held-out NRMSE without [%]": float(f"{c.explained.get('held_out_nrmse_without_pct', np.nan):.4g}"),
                  "held-out NRMSE with [%]": float(f"{c.explained.get('held_out_nrmse_with_pct', np.nan):.4g}"),
                  "held-out t": float(f"{c.explained.get('held_out_t', np.nan):.3g}"),
