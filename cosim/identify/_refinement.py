@@ -12,8 +12,9 @@ Wald tests while the output error's BIC drops (step 3 of that docstring).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -50,10 +51,10 @@ def _noise_floor(runs: Sequence[tuple[np.ndarray, np.ndarray]], meta: Mapping[st
 def _starts(model: IdentifiedModel, features: np.ndarray, targets: np.ndarray, rows: list[int], n_eff: float,
             noise_var: np.ndarray | None, threshold: float | str, ridge: float, coef_scale: np.ndarray,
             runs: Sequence[tuple[np.ndarray, np.ndarray]] = (), dt: float = 0.0, kin: Mapping[str, str] | None = None
-            ) -> list[tuple[str, IdentifiedModel]]:
+            ) -> list[tuple[str, IdentifiedModel | Callable[[], IdentifiedModel | None]]]:
     """The equation-error starts of the refinement: `model`, when noise compensation applied the fit without it
     (unless it is the same to 1e-3 of every target), and with pinned kinematics the fit on velocity integrals
-    (:func:`_velocity_start`).
+    (:func:`_velocity_start`, as a function that makes it: the multi-start often stops before it).
 
     Noise compensation drops the directions whose signal is below their noise: on noisy positions the twist
     of a stiff shaft is such a direction, and the spring it carries starts near zero, a start from which
@@ -70,9 +71,8 @@ def _starts(model: IdentifiedModel, features: np.ndarray, targets: np.ndarray, r
         if np.max(np.abs((coef - model.coef) * coef_scale)) > 1e-3:
             starts.append(("uncompensated", IdentifiedModel(states=model.states, inputs=model.inputs,
                                                             terms=model.terms, coef=coef, dt=model.dt)))
-    velocity = _velocity_start(model, runs, dt, kin or {}) if runs else None
-    if velocity is not None:
-        starts.append(("velocity_integral", velocity))
+    if runs and kin and model.is_linear:  # made when the multi-start reaches it (it often stops before)
+        starts.append(("velocity_integral", partial(_velocity_start, model, runs, dt, kin)))
     return starts
 
 
@@ -106,7 +106,7 @@ def _velocity_start(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.
     return best
 
 
-def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[np.ndarray, np.ndarray]],
+def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, np.ndarray]],
             dt: float, kin: Mapping[str, str], coef_scale: np.ndarray, meta: dict[str, Any],
             known_x0: list[np.ndarray] | None, *, refine_options: Mapping[str, Any], refine_initial_state: bool,
             prune: bool, prefer_stable: bool = False) -> IdentifiedModel:
@@ -144,6 +144,9 @@ def _refine(starts: Sequence[tuple[str, IdentifiedModel]], runs: Sequence[tuple[
         best = _pick(fits, prefer_stable)
         if best is not None and best.fit.cost <= _FLOOR_MARGIN * floor and (best.stable or not prefer_stable):
             break  # the free run already follows the data to its noise: no start can do much better
+        model = model() if callable(model) else model
+        if model is None:
+            continue
         support = model.coef != 0.0
         for pos in kin:
             support[model.states.index(pos)] = False
