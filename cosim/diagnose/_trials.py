@@ -140,6 +140,25 @@ def _without_absorbed(trial: IdentifiedModel, cand: EffectCandidate, absorbed: t
     return (replace(trial, coef=coef), removed) if removed else None
 
 
+def _absorbing(trial: IdentifiedModel, cand: EffectCandidate, absorbed: tuple[str, ...], fitted: tuple,
+               cols: dict[str, np.ndarray], dt: float, screen: OutputErrorScreen, fit: _FitOptions):
+    """The best by BIC of `fitted` (an output-error fit of `trial`: model, standard errors, nuisances) and the
+    fits without the `absorbed` terms (all, or each alone; :func:`_without_absorbed`), and how many
+    coefficients the winner freed."""
+    n = screen.n_obs
+    best, freed, score = fitted, 0, n * math.log(fitted[0].meta["refinement"]["cost"])
+    subsets = [absorbed, *[(t,) for t in absorbed]] if len(absorbed) > 1 else [absorbed]
+    for terms in subsets:
+        alt = _without_absorbed(trial, cand, terms, screen) if terms else None
+        if alt is None:
+            continue
+        other = output_error_fit(alt[0], cols, dt, nuisances=best[2], iterations=40, **fit.kw)
+        other_score = n * math.log(other[0].meta["refinement"]["cost"]) - alt[1] * math.log(n)
+        if other_score < score:
+            best, freed, score = other, alt[1], other_score
+    return best, freed
+
+
 def _parameters(cand: EffectCandidate, own: Nuisance | None) -> int:
     """How many parameters an effect adds: its coefficients (none when tied to the input's gain) and its own
     nuisance."""
@@ -197,17 +216,9 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
         freed = 0
-        absorbed = effect.absorbs(placed) if effect.absorbs is not None else ()
-        best = screen.n_obs * math.log(model.meta["refinement"]["cost"])
-        # the effect in place of the terms it linearises to (all, or each alone), if BIC prefers it
-        for terms in ([absorbed, *[(t,) for t in absorbed]] if len(absorbed) > 1 else [absorbed] * bool(absorbed)):
-            alt = _without_absorbed(trial, cand, terms, screen)
-            if alt is None:
-                continue
-            other = output_error_fit(alt[0], cols, dt, nuisances=nuis, iterations=40, **fit.kw)
-            score = screen.n_obs * math.log(other[0].meta["refinement"]["cost"]) - alt[1] * math.log(screen.n_obs)
-            if score < best:
-                (model, se, nuis), freed, best = other, alt[1], score
+        if effect.absorbs is not None:  # the effect in place of the terms it linearises to, if BIC prefers it
+            (model, se, nuis), freed = _absorbing(trial, cand, effect.absorbs(placed), (model, se, nuis), cols,
+                                                  dt, screen, fit)
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
         if effect.physical is not None:

@@ -209,8 +209,9 @@ class Effect:
     #: this factor times the input's (a saturation: ``b * clip(u) = b * u - b * (u - clip(u))``), not a free one.
     input_tie: float | None = None
     #: The base model's terms the effect's linearisation is, at an attachment (gravity's ``sin x`` over a small
-    #: swing: a spring to ground ``x`` and a constant ``1``): the trial also starts with them moved into the
-    #: effect's terms, since a fit that keeps them only slides along the valley where they trade off.
+    #: swing: a spring to ground ``x`` and a constant ``1``): the trial is also fitted without them (all, or each
+    #: alone), their force moved into the effect's terms, and BIC chooses; kept beside the effect they trade off
+    #: with it and charge it for parameters the plant may not have.
     absorbs: Callable[[Attachment], tuple[str, ...]] | None = None
     #: The nuisance's range the record can show at an attachment, from its signal and the record
     #: (:mod:`~cosim.diagnose._record_band`); None from it: the effect cannot be identified there. For an effect

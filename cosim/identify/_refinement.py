@@ -71,7 +71,7 @@ def _starts(model: IdentifiedModel, features: np.ndarray, targets: np.ndarray, r
         if np.max(np.abs((coef - model.coef) * coef_scale)) > 1e-3:
             starts.append(("uncompensated", IdentifiedModel(states=model.states, inputs=model.inputs,
                                                             terms=model.terms, coef=coef, dt=model.dt)))
-    if runs and kin and model.is_linear:  # made when the multi-start reaches it (it often stops before)
+    if runs and kin:  # made when the multi-start reaches it (it often stops before)
         starts.append(("velocity_integral", partial(_velocity_start, model, runs, dt, kin)))
     return starts
 

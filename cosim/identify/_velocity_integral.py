@@ -88,6 +88,7 @@ def velocity_integral_start(model: IdentifiedModel, runs: Sequence[tuple[np.ndar
     y = np.vstack([b[1] for b in blocks])
     coef = model.coef.copy()
     k_const = model.terms.index("1") if "1" in model.terms else None
+    mean_terms = np.mean(np.vstack([model.features(x, u) for x, u in runs]), axis=0) if k_const is not None else None
     for r, i in enumerate(free):
         support = [j for j in range(len(model.terms)) if model.coef[i, j] != 0.0 and j != k_const]
         if not support:
@@ -100,7 +101,6 @@ def velocity_integral_start(model: IdentifiedModel, runs: Sequence[tuple[np.ndar
         if k_const is not None and model.coef[i, k_const] != 0.0:
             # the constant from the mean slope of the row's state over every record
             slope = sum(x[-1, i] - x[0, i] for x, _ in runs) / (dt * sum(len(x) - 1 for x, _ in runs))
-            mean_terms = np.mean(np.vstack([model.features(x, u) for x, u in runs]), axis=0)
             coef[i, k_const] = slope - float(mean_terms[support] @ sol)
     if not np.all(np.isfinite(coef)):
         return None
