@@ -340,6 +340,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         # and so may a term of the base model (a spring to ground standing in for friction)
         current, nuisances, gone = _retest_base(current, model, columns, dt, nuisances, fit)
         dropped += gone
+        _write_back(accepted, owners, nuisances)  # (the refits moved the nuisances: the terms are written anew)
         # and the refits may have moved an effect's parameters out of what the plant can have
         current, accepted, owners, nuisances, implausible = _drop_implausible(current, accepted, owners,
                                                                              nuisances, columns, dt, fit)
