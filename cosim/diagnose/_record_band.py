@@ -207,6 +207,13 @@ def stribeck_span(velocity: np.ndarray, band: RecordBand, name: str) -> tuple[fl
     return (lo, hi) if lo <= hi else None
 
 
+def stribeck_shown(vs: float, velocity: np.ndarray) -> bool:
+    """Whether the speeds reach twice `vs`, where the Stribeck excess has fallen to 2 % (below that, a
+    Stribeck velocity is a Coulomb friction that fades at the top speed: its decay is not in the record)."""
+    v = np.abs(np.asarray(velocity, dtype=float))
+    return bool(v.size) and float(v.max()) >= 2.0 * vs
+
+
 def stribeck_grid(lo: float, hi: float, velocity: np.ndarray) -> list[float]:
     """The log grid over the span, less the values with too few samples below or above twice the value."""
     v = np.abs(np.asarray(velocity, dtype=float))

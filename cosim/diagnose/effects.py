@@ -198,6 +198,15 @@ class Effect:
     #: False when the data pin only a product of the nuisance and a coefficient (a backlash's width times its
     #: term's gain): the output-error fit then keeps the nuisance fixed and :attr:`physical` sets it.
     fit_nuisance: bool = True
+    #: Whether the trial fit is started from every value of the nuisance's grid, not only the screening's
+    #: (:func:`~cosim.diagnose.diagnosis._trial_fit`): for a physical nuisance whose fit has several minima a grid
+    #: step apart (a Stribeck velocity). Not for a smoothing scale: started wide, a Coulomb friction settles
+    #: on a smoother switch and a biased Fc (generalisation benchmark records 30 and 59: 0.3 -> 14.5 %, 0.9 ->
+    #: 6.8 %).
+    multistart: bool = False
+    #: Whether a fitted nuisance value is one the record shows, from the value and the nuisance's signal (a
+    #: Stribeck velocity the speeds reach twice of); a multi-started fit that ends elsewhere is not kept.
+    shown: Callable[[float, np.ndarray], bool] | None = None
     #: The nuisance value implied by the fitted coefficients and the model's physics (None: keep the value).
     #: The terms of the fit when they differ from the screening's (a delay: two neighbouring taps).
     make_fit_terms: Callable[[Attachment, float | None], tuple[str, ...]] | None = None
@@ -553,7 +562,7 @@ register_effect(Effect(
     "velocity", "vs", "velocity",
     lambda a, v: (f"exp(-({a.signals[0]}/{_num(v)})**2)*tanh({a.signals[0]}/{_num(v / 30)})",), _stribeck_params,
     grid_fractions=(3e-3, 1e-2, 3e-2, 0.1, 0.3), plausible=lambda p: not p["Fs"] <= 0.0,
-    span=rb.stribeck_span, make_grid=rb.stribeck_grid))
+    span=rb.stribeck_span, make_grid=rb.stribeck_grid, multistart=True, shown=rb.stribeck_shown))
 register_effect(Effect(
     "backlash", "backlash: a dead band in the coupling between two positions (no force inside the gap)",
     "pair", "half_width", "twist",
