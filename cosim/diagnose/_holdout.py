@@ -115,11 +115,13 @@ class HeldOutEvidence:
     #: The lower of the two folds' own statistics: an effect that only one half of the records bears out (a
     #: constant standing in for the mean of a slow, uncovered force over that half) does not pass.
     worst_fold: float = math.inf
+    #: The least relative drop of the held-out NRMSE the effect had to bring (:attr:`HeldOutCheck.min_gain`).
+    min_gain: float = 0.0
 
     @property
     def passed(self) -> bool:
         return (self.statistic >= HELD_OUT_T and self.worst_fold >= HELD_OUT_FOLD_T
-                and self.nrmse_with_pct < self.nrmse_without_pct)
+                and self.nrmse_with_pct < self.nrmse_without_pct * (1.0 - self.min_gain))
 
     def as_explained(self) -> dict[str, float]:
         """The figures as entries of :attr:`EffectCandidate.explained`."""
@@ -147,6 +149,9 @@ class HeldOutCheck:
         #: Whether the records are long enough to be split (the folds themselves are cut in :meth:`judge`, from
         #: the columns with whatever an effect adds).
         self.possible = Folds.of(columns, self.segments) is not None
+        #: The least relative drop of the held-out NRMSE an effect must bring besides the statistic (0: any drop
+        #: beyond noise). The diagnosis raises it once an effect is in (see ``diagnosis.LATER_GAIN``).
+        self.min_gain = 0.0
         self._base: tuple[IdentifiedModel, list[np.ndarray]] | None = None
 
     def _fold_residuals(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray]) -> list[np.ndarray]:
@@ -190,12 +195,13 @@ class HeldOutCheck:
         try:
             folds = self._fold_residuals(fuller, columns)
         except (DataError, np.linalg.LinAlgError, FloatingPointError):
-            return HeldOutEvidence(-math.inf, _nrmse_pct(without, self._spread(base, columns)), math.inf)
+            return HeldOutEvidence(-math.inf, _nrmse_pct(without, self._spread(base, columns)), math.inf,
+                                   min_gain=self.min_gain)
         with_ = np.concatenate(folds)
         spread = self._spread(base, columns)
         each = min(noise_z(a, b) for a, b in zip(self._base[1], folds, strict=True))
         return HeldOutEvidence(noise_z(without, with_), _nrmse_pct(without, spread), _nrmse_pct(with_, spread),
-                               each)
+                               each, self.min_gain)
 
     def _spread(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray]) -> np.ndarray:
         """Each state's standard deviation, in units of its noise level (the residuals' scale); NaN for a state
