@@ -152,7 +152,7 @@ class HeldOutCheck:
         #: The least relative drop of the held-out NRMSE an effect must bring besides the statistic (0: any drop
         #: beyond noise). The diagnosis raises it once an effect is in (see ``diagnosis.LATER_GAIN``).
         self.min_gain = 0.0
-        self._base: tuple[IdentifiedModel, list[np.ndarray]] | None = None
+        self._base: tuple[IdentifiedModel, list[np.ndarray] | None] | None = None
 
     def _fold_residuals(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray]) -> list[np.ndarray]:
         """For each fold: `model` fitted on it, its scaled free-run residual on the other fold."""
@@ -187,10 +187,16 @@ class HeldOutCheck:
         """Whether `fuller` (the base with an effect) beats `base` on the folds it was not fitted to.
 
         `columns` are the data with any column the effect adds (a delayed input). A fold fit that fails or
-        diverges counts against the effect.
+        diverges counts against the effect; so does one of `base` (a model that diverges on held-out data gives
+        no yardstick: no effect is accepted on it).
         """
         if self._base is None or self._base[0] is not base:
-            self._base = (base, self._fold_residuals(base, columns))
+            try:
+                self._base = (base, self._fold_residuals(base, columns))
+            except (DataError, np.linalg.LinAlgError, FloatingPointError):
+                self._base = (base, None)
+        if self._base[1] is None:  # the model without the effect diverges on held-out data: nothing to judge by
+            return HeldOutEvidence(-math.inf, math.inf, math.inf, min_gain=self.min_gain)
         without = np.concatenate(self._base[1])
         try:
             folds = self._fold_residuals(fuller, columns)
