@@ -1,27 +1,35 @@
-"""A Stribeck friction found from its own velocity scale, and kept once found.
+"""Records of the generalisation benchmark (benchmarks/independent_plants.py, an independent scipy simulator)
+that the default ``cosim diagnose DATA`` once got wrong, each for a reason fixed since.
 
-Record 113 of the generalisation benchmark (benchmarks/independent_plants.py, an independent scipy
-simulator): a single mass (0.68 kg, 1.16 N s/m) under a multisine, 251 Hz for 7.3 s, 0.23 % noise, with a
-Stribeck friction ``-Fs exp(-(v/vs)^2) tanh(v/eps)``, Fs 0.810 N, vs 0.445 m/s. Two faults hid it:
+**A Stribeck friction found from its own velocity scale, and kept once found.** Record 113: a single mass
+(0.68 kg, 1.16 N s/m) under a multisine, 251 Hz for 7.3 s, 0.23 % noise, with a Stribeck friction
+``-Fs exp(-(v/vs)^2) tanh(v/eps)``, Fs 0.810 N, vs 0.445 m/s. Two faults hid it:
 
 * the score test picked vs = 0.065 m/s on the linear model's sensitivities; the trial fit from there stays in
   a local minimum (output-error cost 22 600 against 25 960 without it) while from 0.42 m/s it falls to 3 770.
-  The trial fit of an effect with a fitted nuisance is now started from every value of its grid
-  (``diagnosis._trial_fit``);
+  The trial fit is now started from every value of the vs grid (``cosim.diagnose._starts``);
 * once accepted, the base retest refitted the model and moved vs; the accepted effect's terms were not
   written anew before the plausibility check, which then read the screening's stale parameters (Fs < 0) and
   dropped the effect as implausible.
 
 Before both fixes ``cosim diagnose`` named nothing on this record.
 
-Started from every grid value, a Stribeck fit can also end where the record shows no Stribeck effect: on record
-181 (a single mass with Coulomb friction and an input saturation) at vs = 2.03 m/s, which the speeds (at most
-2.7 m/s) never reach twice of; there it is a Coulomb friction that fades at the top speed, where the saturation
-takes the force away, and it won the round. Such a fit is not kept (``Effect.shown``): Coulomb is named.
+**A Stribeck velocity the speeds do not reach is not one.** Started from every grid value, a Stribeck fit can
+end where the record shows no Stribeck effect: on record 181 (a single mass with Coulomb friction and an input
+saturation) at vs = 2.03 m/s, which the speeds (at most 2.7 m/s) never reach twice of; there it is a Coulomb
+friction that fades at the top speed, where the saturation takes the force away, and it won the round. Such a
+fit is not kept (``Effect.shown``): Coulomb is named.
 
-Once one effect is in, a second must also lower the held-out error by ``diagnosis.LATER_GAIN`` (5 %): on record
-198 (a single mass with a Stribeck friction alone, under steps) the Stribeck model's switch is not the plant's,
-and an offset took up what it left, lowering the held-out NRMSE by 2.3 % (1.81 -> 1.77 %), beyond noise.
+**No second effect for what the first leaves.** Once one effect is in, a second must also lower the held-out
+error by ``diagnosis.LATER_GAIN`` (5 %): on record 198 (a single mass with a Stribeck friction alone, under
+steps) the Stribeck model's switch is not the plant's, and an offset took up what it left, lowering the
+held-out NRMSE by 2.3 % (1.81 -> 1.77 %), beyond noise.
+
+**A cogging's period from its trial fits, not its score alone.** Record 83: a two-mass plant (multisine, 1.2 %
+noise) with a cogging of 19 periods per revolution on the load. On the base's drifting free run the score is
+nearly flat over the periods (65 on the motor scores best, -17 800; 19 on the load -17 100) and the trial fit
+at 65 gains little (-315), so a Stribeck friction was named first. The trial fit is now also started from the
+score's best peaks at every place (``_starts.PEAKS``): at 19 on the load it gains -4 460.
 """
 
 from __future__ import annotations
@@ -42,10 +50,10 @@ import independent_plants as ip  # noqa: E402
 def _diagnose(index: int, folder: Path) -> tuple[dict, dict]:
     """The record's spec and ``cosim diagnose``'s JSON on it (the default path: signal names only)."""
     record = ip.make_record(index, max_samples=4000)
-    assert record.spec["plant"]["kind"] == "single"
+    assert not record.cli["derive"]  # (every state measured)
     record.write(folder)
-    result = CliRunner().invoke(main, ["diagnose", str(folder / "train.csv"), "--state", "x,v", "--input", "u",
-                                       "--json"])
+    result = CliRunner().invoke(main, ["diagnose", str(folder / "train.csv"), "--state",
+                                       ",".join(record.cli["states"]), "--input", record.cli["input"], "--json"])
     assert result.exit_code == 0, result.output
     return record.spec, json.loads(result.stdout)
 
@@ -80,3 +88,16 @@ def test_no_second_effect_for_what_the_first_leaves(tmp_path):
     assert [e["name"] for e in spec["effects"]] == ["stribeck"]
     assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("stribeck", "v")], payload["message"]
     assert payload["effects"][0]["parameters"]["Fs"] == pytest.approx(spec["effects"][0]["params"]["Fs"], rel=0.15)
+
+
+@pytest.mark.slow
+def test_cogging_period_from_the_trial_fits(tmp_path):
+    spec, payload = _diagnose(83, tmp_path)
+    truth = spec["effects"][0]
+    assert (truth["name"], truth["at"]) == ("cogging", "theta_L") and truth["params"]["periods"] == 19
+    assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("cogging", "theta_L")], \
+        payload["message"]
+    found = payload["effects"][0]["parameters"]
+    assert found["periods"] == 19
+    # in the input's units (a torque), as the simulator's amplitude
+    assert found["amplitude_omega_L"] == pytest.approx(truth["params"]["amplitude"], rel=0.10)

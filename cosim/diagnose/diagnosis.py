@@ -12,12 +12,13 @@
 2. **Rank** the candidates by their change of BIC, refine the leading ones' nuisance parameters by a bounded
    scalar search, then **fit the leading candidates for real** (Gauss-Newton output error with the nuisance
    parameter) and judge them on the actual drop of the output error: the first-order score misleads when
-   the model error is large. An effect whose fit has several minima in its nuisance (a Stribeck velocity) is
-   fitted from every value of its grid (:func:`_trial_fit`). A candidate is **significant** when its
-   likelihood-ratio p-value is below `alpha`, it lowers BIC by more than `bic_margin`, *and* its correction
-   moves at least `min_size` of the data's spread: the first two are strict because the search tries a few
-   hundred candidates (data without an effect must give "no effect found"), the third because on long or
-   noise-free records a negligible mismatch (discretisation, say) is significant without being physical.
+   the model error is large. An effect whose fit has several minima in its nuisance (a Stribeck velocity, a
+   cogging's periods) is fitted from several values (:func:`~cosim.diagnose._starts.trial_fit`). A candidate
+   is **significant** when its likelihood-ratio p-value is below `alpha`, it lowers BIC by more than
+   `bic_margin`, *and* its correction moves at least `min_size` of the data's spread: the first two are strict
+   because the search tries a few hundred candidates (data without an effect must give "no effect found"),
+   the third because on long or noise-free records a negligible mismatch (discretisation, say) is significant
+   without being physical.
 3. **Add** the best significant one (dropping rows where its coefficient is not clearly non-zero), and go
    to the next round while a significant effect remains (at most `max_effects`).
 4. **Refit** after each accepted effect by output error (Gauss-Newton on the same sensitivities; unbiased
@@ -70,9 +71,9 @@ from tqdm.auto import tqdm
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..identify.model import IdentifiedModel
-from . import _record_band as rb
 from ._holdout import HeldOutCheck
-from ._ranking import _round, check_effect_selection, record_band
+from ._ranking import _round, check_effect_selection
+from ._starts import trial_fit
 from ._trials import (
     _base_offset,
     _bounded_first,
@@ -89,7 +90,7 @@ from ._trials import (
 )
 from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport, _figures
-from .effects import EFFECTS, Attachment, effect_names
+from .effects import EFFECTS, effect_names
 from .residuals import ResidualAnalysis, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit
 
@@ -116,9 +117,6 @@ MIN_SIZE = 0.002
 VERIFY_TOP = 6
 #: Gauss-Newton iterations of a trial fit (the winner is then fitted to convergence).
 TRIAL_ITERATIONS = 4
-#: Gauss-Newton iterations of each start of a trial fit with a fitted nuisance parameter (:func:`_trial_fit`):
-#: from a start a grid step away, a Stribeck fit takes 5-8 to reach its basin's floor.
-START_ITERATIONS = 8
 #: How many significant trial fits of a round may be tried on held-out data, best first, before giving up.
 HELD_OUT_TRIES = 3
 #: The least relative drop of the held-out NRMSE an effect must bring once another is in (the offset judged last
@@ -323,8 +321,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         bar.update(1)
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
-        trials = [_trial_fit(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit, names)
-                  for c in ranking[:VERIFY_TOP] if c.significant]
+        trials = [trial_fit(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit, names,
+                            TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
         fitted.append(tuple(t.candidate for t in trials if t is not None))
         trials = _bounded_first(sorted((t for t in trials if t is not None and t.candidate.significant),
                                        key=lambda t: t.candidate.delta_bic), screen.n_obs)
@@ -397,47 +395,6 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
                            rejected=tuple(rejected), dropped_terms=tuple(dropped))
-
-
-def _trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
-               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
-               min_size: float, fit: _FitOptions, names: Sequence[str]):
-    """A leading candidate's trial fit; one of an effect with :attr:`~cosim.diagnose.effects.Effect.multistart`
-    (a Stribeck velocity) is started from each value of its nuisance's grid, and the lowest output error kept.
-
-    The score test picks the nuisance value on the base model's sensitivities, to first order; the trial fit
-    from there can settle in a local minimum when the effect is large beside the noise (the fit's basin in a
-    Stribeck velocity spans about a factor 3, the grid's step). Each start costs one short fit. A fit that ends
-    at a value the record does not show (:attr:`~cosim.diagnose.effects.Effect.shown`: a Stribeck velocity the
-    speeds never reach twice of, a Coulomb friction fading at the top speed) is not kept; when none is left,
-    the candidate is not significant."""
-    effect = EFFECTS[cand.name]
-    searched = effect.multistart and cand.nuisance is not None \
-        and not any(n.startswith(cand.name + ":") for n in names)  # (a value the user fixed is not searched)
-    start = _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
-                      iterations=START_ITERATIONS if searched else TRIAL_ITERATIONS)
-    if not searched:
-        return start
-    placed = Attachment(cand.attached_to, tuple(cand.attached_to.split("-")) if cand.attached_to != "constant"
-                        else (), cand.rows)
-    band = record_band(screen)
-    best = None
-    values = [v for v in effect.grid(placed, screen.free_run, band)
-              if v is not None and abs(math.log(v / cand.nuisance)) >= 0.5 * math.log(rb.LOG_STEP)]
-    for value in [None, *values]:
-        trial = start if value is None else _fit_with(
-            current, replace(cand, nuisance=value, coefficients=()), columns, dt, nuisances, screen, alpha,
-            bic_margin, min_size, fit, iterations=START_ITERATIONS)
-        if trial is None or (effect.shown is not None and not effect.shown(
-                trial.candidate.nuisance, effect.signal(placed, screen.free_run))):
-            continue  # (fitted to a value the record does not show: a Stribeck velocity the speeds do not pass)
-        if best is None or _cost_of(trial.model) < _cost_of(best.model):
-            best = trial
-    if best is None and start is not None:  # every fit left the band: the record cannot show the effect
-        start.candidate = replace(start.candidate, significant=False,
-                                  explained={**start.candidate.explained, "outside_band": 1.0})
-        return start
-    return best
 
 
 def _drop_implausible(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],

@@ -198,9 +198,9 @@ class Effect:
     #: False when the data pin only a product of the nuisance and a coefficient (a backlash's width times its
     #: term's gain): the output-error fit then keeps the nuisance fixed and :attr:`physical` sets it.
     fit_nuisance: bool = True
-    #: Whether the trial fit is started from every value of the nuisance's grid, not only the screening's
-    #: (:func:`~cosim.diagnose.diagnosis._trial_fit`): for a physical nuisance whose fit has several minima a grid
-    #: step apart (a Stribeck velocity). Not for a smoothing scale: started wide, a Coulomb friction settles
+    #: Whether the trial fit is started from several values of the nuisance, not only the screening's
+    #: (:func:`~cosim.diagnose._starts.trial_fit`): for a physical nuisance whose fit has several minima (a
+    #: Stribeck velocity, a cogging's periods). Not for a smoothing scale: started wide, a Coulomb friction settles
     #: on a smoother switch and a biased Fc (generalisation benchmark records 30 and 59: 0.3 -> 14.5 %, 0.9 ->
     #: 6.8 %).
     multistart: bool = False
@@ -579,7 +579,7 @@ register_effect(Effect(
 register_effect(Effect(
     "cogging", "cogging: a torque periodic in an angle (n periods per radian)", "position", "periods", "periods",
     lambda a, v: (f"sin({_num(v)}*{a.signals[0]})", f"cos({_num(v)}*{a.signals[0]})"), _periodic_params("periods"),
-    integer=True, span=rb.periodic_span, make_grid=rb.periodic_grid))
+    integer=True, span=rb.periodic_span, make_grid=rb.periodic_grid, multistart=True))
 register_effect(Effect(
     "gravity", "gravity: a torque proportional to the sine of an angle (an unbalanced load)", "position", None, "",
     lambda a, v: (f"sin({a.signals[0]})", f"cos({a.signals[0]})"), _periodic_params("periods"),

@@ -1,0 +1,97 @@
+"""A leading candidate's trial fit in :func:`~cosim.diagnose.diagnosis.diagnose`, from several starts where one
+is not enough.
+
+The screening picks an effect's nuisance value on the base model's sensitivities, to first order; the trial fit
+from there can settle in a local minimum when the effect is large beside the noise or the base's free run
+drifts. For an effect with :attr:`~cosim.diagnose.effects.Effect.multistart`:
+
+* a continuous nuisance (a Stribeck velocity, whose fit's basin spans about a factor 3, the grid's step) is
+  started from every value of its grid, :data:`START_ITERATIONS` each;
+* a whole-number one (a cogging's periods per revolution, whose score over the periods is nearly flat on a
+  drifting two-mass free run: record 83 of the generalisation benchmark scores 65 periods at -17 800 and the
+  true 19 at -15 800 to -17 100, and their trial fits give -315 and -19 976) is started from the best-scoring
+  values, :data:`PEAKS` more at every place it attaches, each a peak of the score (not next to a better value).
+
+The lowest output error is kept. A fit that ends at a value the record does not show
+(:attr:`~cosim.diagnose.effects.Effect.shown`: a Stribeck velocity the speeds never reach twice of, a Coulomb
+friction fading at the top speed) is not kept; when none is left, the candidate is not significant.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from ..identify.model import IdentifiedModel
+from . import _record_band as rb
+from ._ranking import _scores, record_band
+from ._trials import _cost_of, _fit_with, _FitOptions, _Trial
+from .candidates import EffectCandidate
+from .effects import EFFECTS, Attachment, Effect
+from .screening import Nuisance, OutputErrorScreen
+
+#: Gauss-Newton iterations of each start of a continuous nuisance's fit: from a start a grid step away, a
+#: Stribeck fit takes 5-8 to reach its basin's floor.
+START_ITERATIONS = 8
+#: Best-scoring values of a whole-number nuisance tried at each place, besides the screening's.
+PEAKS = 2
+
+
+def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
+              nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
+              min_size: float, fit: _FitOptions, names: Sequence[str], iterations: int) -> _Trial | None:
+    """`cand` fitted with `iterations` Gauss-Newton steps, from several starts if its effect asks (module notes).
+
+    `names` is the effect selection: a nuisance value the user fixed (``"stribeck:vs=0.3"``) is not searched."""
+    effect = EFFECTS[cand.name]
+    searched = effect.multistart and cand.nuisance is not None \
+        and not any(n.startswith(cand.name + ":") for n in names)
+    if not searched:
+        return _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                         iterations=iterations)
+    band = record_band(screen)
+    if effect.integer:
+        starts = [cand, *_score_peaks(screen, effect, cand, band, alpha, bic_margin, min_size)]
+    else:
+        grid = effect.grid(_placed(cand), screen.free_run, band)
+        starts = [cand] + [replace(cand, nuisance=v, coefficients=()) for v in grid
+                           if v is not None and abs(math.log(v / cand.nuisance)) >= 0.5 * math.log(rb.LOG_STEP)]
+        iterations = max(iterations, START_ITERATIONS)
+    first, best = None, None
+    for k, start in enumerate(starts):
+        trial = _fit_with(current, start, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                          iterations=iterations)
+        first = trial if k == 0 else first
+        if trial is None or (effect.shown is not None and not effect.shown(
+                trial.candidate.nuisance, effect.signal(_placed(trial.candidate), screen.free_run))):
+            continue
+        if best is None or _cost_of(trial.model) < _cost_of(best.model):
+            best = trial
+    if best is None and first is not None:  # every fit left what the record shows
+        first.candidate = replace(first.candidate, significant=False,
+                                  explained={**first.candidate.explained, "outside_band": 1.0})
+        return first
+    return best
+
+
+def _placed(cand: EffectCandidate) -> Attachment:
+    signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
+    return Attachment(cand.attached_to, signals, cand.rows)
+
+
+def _score_peaks(screen: OutputErrorScreen, effect: Effect, cand: EffectCandidate, band, alpha: float,
+                 bic_margin: float, min_size: float) -> list[EffectCandidate]:
+    """At every place `effect` attaches, the :data:`PEAKS` best-scoring whole-number values of its nuisance that
+    are peaks of the score (no neighbour scores better), other than `cand`'s own."""
+    out = []
+    for attachment in effect.attachments(screen.roles):
+        values = effect.grid(attachment, screen.free_run, band)
+        scored = {c.nuisance: c for c in _scores(screen, effect, attachment, values, alpha, bic_margin, min_size)}
+        peaks = [c for v, c in scored.items()
+                 if all(scored[n].delta_bic >= c.delta_bic for n in (v - 1, v + 1) if n in scored)
+                 and not (attachment.label == cand.attached_to and v == cand.nuisance)]
+        out += sorted(peaks, key=lambda c: c.delta_bic)[:PEAKS]
+    return out
