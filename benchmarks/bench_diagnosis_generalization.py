@@ -297,7 +297,9 @@ def run_record(index: int, data_dir: str, max_samples: int, paths: tuple[str, ..
                                     "error": f"unreadable JSON: {exc}"})
             continue
         effects = payload.get("effects", [])
-        res["effects"] = [{k: e.get(k) for k in ("name", "attached_to", "parameters")} for e in effects]
+        # with the evidence each was accepted on (held-out figures, size, BIC), to study the claims afterwards
+        res["effects"] = [{k: e.get(k) for k in ("name", "attached_to", "parameters", "explained", "delta_bic")}
+                          for e in effects]
         res["before_nrmse_pct"] = payload.get("before", {}).get("nrmse_pct")
         res["after_nrmse_pct"] = payload.get("after", {}).get("nrmse_pct")
         after_path = folder / f"model_after_{path}.json"
