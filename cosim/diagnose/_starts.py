@@ -30,7 +30,7 @@ from . import _record_band as rb
 from ._ranking import _scores, record_band
 from ._trials import _cost_of, _fit_with, _FitOptions, _Trial
 from .candidates import EffectCandidate
-from .effects import EFFECTS, Attachment, Effect
+from .effects import EFFECTS, Effect
 from .screening import Nuisance, OutputErrorScreen
 
 #: Gauss-Newton iterations of each start of a continuous nuisance's fit: from a start a grid step away, a
@@ -56,7 +56,7 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     if effect.integer:
         starts = [cand, *_score_peaks(screen, effect, cand, band, alpha, bic_margin, min_size)]
     else:
-        grid = effect.grid(_placed(cand), screen.free_run, band)
+        grid = effect.grid(cand.placement, screen.free_run, band)
         starts = [cand] + [replace(cand, nuisance=v, coefficients=()) for v in grid
                            if v is not None and abs(math.log(v / cand.nuisance)) >= 0.5 * math.log(rb.LOG_STEP)]
         iterations = max(iterations, START_ITERATIONS)
@@ -66,7 +66,7 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                           iterations=iterations)
         first = trial if k == 0 else first
         if trial is None or (effect.shown is not None and not effect.shown(
-                trial.candidate.nuisance, effect.signal(_placed(trial.candidate), screen.free_run))):
+                trial.candidate.nuisance, effect.signal(trial.candidate.placement, screen.free_run))):
             continue
         if best is None or _cost_of(trial.model) < _cost_of(best.model):
             best = trial
@@ -75,11 +75,6 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                                   explained={**first.candidate.explained, "outside_band": 1.0})
         return first
     return best
-
-
-def _placed(cand: EffectCandidate) -> Attachment:
-    signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
-    return Attachment(cand.attached_to, signals, cand.rows)
 
 
 def _score_peaks(screen: OutputErrorScreen, effect: Effect, cand: EffectCandidate, band, alpha: float,

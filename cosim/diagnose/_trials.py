@@ -180,8 +180,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
               min_size: float, fit: _FitOptions, iterations: int = 15) -> _Trial | None:
     """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
     effect = EFFECTS[cand.name]
-    signals = tuple(cand.attached_to.split("-")) if cand.attached_to != "constant" else ()
-    placed = Attachment(cand.attached_to, signals, cand.rows)
+    placed = cand.placement
     new_cols = effect.columns(placed, cand.nuisance, columns)
     cols = {**columns, **new_cols}
     fit_terms = effect.fit_terms(placed, cand.nuisance)

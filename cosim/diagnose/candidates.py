@@ -73,6 +73,12 @@ class EffectCandidate:
     coefficients: tuple[float, ...] = ()
     nuisance_se: float | None = None
 
+    @property
+    def placement(self) -> Attachment:
+        """Where the candidate acts, as its effect's :class:`~cosim.diagnose.effects.Attachment`."""
+        signals = tuple(self.attached_to.split("-")) if self.attached_to != "constant" else ()
+        return Attachment(self.attached_to, signals, self.rows)
+
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "attached_to": self.attached_to, "rows": list(self.rows),
                 "nuisance": self.nuisance, "terms": list(self.terms), "delta_bic": self.delta_bic,

@@ -319,6 +319,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         rounds.append(tuple(ranking))
         bar.set_postfix_str("fitting " + ", ".join(c.name for c in ranking[:VERIFY_TOP] if c.significant))
         bar.update(1)
+        _set_gain(check, accepted)
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
         trials = [trial_fit(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit, names,
@@ -338,8 +339,6 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         if best is None:
             break
         accepted.append(best.candidate)
-        if check is not None:
-            check.min_gain = LATER_GAIN
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
         current, nuisances = best.model, best.nuisances
@@ -359,6 +358,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         _write_back(accepted, owners, nuisances)
         steps.append((tuple(c.name for c in accepted), current))
     bar.close()
+    _set_gain(check, accepted)
     if "offset" in names and len(accepted) < max_effects:
         # the base's own constant, judged as an effect once the rounds are over (see _base_offset)
         offset = _base_offset(current, columns, dt, nuisances, alpha, bic_margin, min_size, fit, check)
@@ -455,6 +455,12 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
         if beats_offset(trial) and _held_out(check, reduced, trial, columns):
             return trial
     return None
+
+
+def _set_gain(check: HeldOutCheck | None, accepted: Sequence[EffectCandidate]) -> None:
+    """The held-out check asks :data:`LATER_GAIN` of an effect once another is in (none: only to beat noise)."""
+    if check is not None:
+        check.min_gain = LATER_GAIN if accepted else 0.0
 
 
 def _held_out(check: HeldOutCheck | None, base: IdentifiedModel, trial, columns: dict[str, np.ndarray]) -> bool:
