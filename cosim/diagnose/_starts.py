@@ -28,6 +28,7 @@ import numpy as np
 from ..identify.model import IdentifiedModel
 from . import _record_band as rb
 from ._ranking import _scores, record_band
+from ._record_band import RecordBand
 from ._trials import _cost_of, _fit_with, _FitOptions, _Trial
 from .candidates import EffectCandidate
 from .effects import EFFECTS, Effect
@@ -42,17 +43,19 @@ PEAKS = 2
 
 def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
-              min_size: float, fit: _FitOptions, names: Sequence[str], iterations: int) -> _Trial | None:
+              min_size: float, fit: _FitOptions, names: Sequence[str], iterations: int,
+              band: RecordBand | None = None) -> _Trial | None:
     """`cand` fitted with `iterations` Gauss-Newton steps, from several starts if its effect asks (module notes).
 
-    `names` is the effect selection: a nuisance value the user fixed (``"stribeck:vs=0.3"``) is not searched."""
+    `names` is the effect selection: a nuisance value the user fixed (``"stribeck:vs=0.3"``) is not searched;
+    `band` what the record shows (default: from the screen, as the round's ranking had it)."""
     effect = EFFECTS[cand.name]
     searched = effect.multistart and cand.nuisance is not None \
         and not any(n.startswith(cand.name + ":") for n in names)
     if not searched:
         return _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                          iterations=iterations)
-    band = record_band(screen)
+    band = band if band is not None else record_band(screen)
     if effect.integer:
         starts = [cand, *_score_peaks(screen, effect, cand, band, alpha, bic_margin, min_size)]
     else:

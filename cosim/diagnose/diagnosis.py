@@ -72,7 +72,7 @@ from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..identify.model import IdentifiedModel
 from ._holdout import HeldOutCheck
-from ._ranking import _round, check_effect_selection
+from ._ranking import _round, check_effect_selection, record_band
 from ._starts import trial_fit
 from ._trials import (
     _base_offset,
@@ -314,8 +314,9 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             if not accepted:
                 raise
             break  # the model with the effects found so far is too unstable to screen further: report them
+        band = record_band(screen)  # (what the record shows: the ranking's grids and the trials' starts)
         ranking = _round(screen, names, alpha, bic_margin, min_size,
-                         taken=[(c.name, c.attached_to) for c in accepted])
+                         taken=[(c.name, c.attached_to) for c in accepted], band=band)
         rounds.append(tuple(ranking))
         bar.set_postfix_str("fitting " + ", ".join(c.name for c in ranking[:VERIFY_TOP] if c.significant))
         bar.update(1)
@@ -323,7 +324,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
         trials = [trial_fit(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit, names,
-                            TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
+                            TRIAL_ITERATIONS, band) for c in ranking[:VERIFY_TOP] if c.significant]
         fitted.append(tuple(t.candidate for t in trials if t is not None))
         trials = _bounded_first(sorted((t for t in trials if t is not None and t.candidate.significant),
                                        key=lambda t: t.candidate.delta_bic), screen.n_obs)
