@@ -25,6 +25,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -371,30 +372,46 @@ def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequ
     def run(x0, rows, h, nsub, limit):
         rows = np.asarray(rows, dtype=float).reshape(len(rows), len(inputs))
         runner = chunk(nsub, len(rows) >= _JIT_MIN_STEPS)
-        return _chunked_run(lambda state, held: runner(state, held, h, params), x0, rows, limit)
+        return _chunked_run(runner, (h, params), x0, rows, limit)
 
     return run
 
 
-def _chunked_run(call, x0, rows: np.ndarray, limit: float):
-    """Step a CasADi chunk (`call(state, rows.T)`, :data:`_CASADI_CHUNK` steps) over `rows` from `x0`, the last
-    call padded with the last row held (its extra steps dropped); stop at the first state at or beyond `limit`
-    (or NaN). Returns ``(status, steps done, states after each step)``."""
-    steps, out = len(rows), []
-    state = np.asarray(x0, dtype=float)
+def _chunked_run(function, tail: Sequence[Any], x0, rows: np.ndarray, limit: float):
+    """Step a CasADi chunk ``function(state, rows, *tail)`` (:data:`_CASADI_CHUNK` steps, the rows as a
+    (n_rows, chunk) matrix) over `rows` from `x0`, the last call padded with the last row held (its extra steps
+    dropped); stop at the first state at or beyond `limit` (or NaN). Returns ``(status, steps done, states
+    after each step)``.
+
+    The function is evaluated on NumPy memory through CasADi's buffer interface (``Function.buffer``): a
+    call with arrays converts each to a DM and back, 0.25 ms a call against 8 us, which was most of the
+    time of a 20 000-sample run (20 calls). CasADi matrices are column-major, so a C-ordered (chunk, k) array
+    is the (k, chunk) matrix the function takes and gives.
+    """
+    steps, n = len(rows), len(x0)
+    state = np.array(x0, dtype=float).ravel()
+    held = np.empty((_CASADI_CHUNK, rows.shape[1]))
+    result = np.empty((_CASADI_CHUNK, n))
+    fixed = [np.ascontiguousarray(np.atleast_1d(value), dtype=float) for value in tail]
+    buffer, evaluate = function.buffer()
+    for i, array in enumerate([state, held, *fixed]):
+        buffer.set_arg(i, memoryview(array))
+    buffer.set_res(0, memoryview(result))
+    out = np.empty((steps, n))
     for first in range(0, steps, _CASADI_CHUNK):
         block = rows[first:first + _CASADI_CHUNK]
-        held = np.vstack([block, np.repeat(block[-1:], _CASADI_CHUNK - len(block), axis=0)]) \
-            if len(block) < _CASADI_CHUNK else block
-        result = np.asarray(call(state, held.T)).T[:len(block)]
-        bad = ~np.all(np.abs(result) < limit, axis=1)  # also catches NaN
+        k = len(block)
+        held[:k] = block
+        held[k:] = block[-1]
+        evaluate()
+        bad = ~np.all(np.abs(result[:k]) < limit, axis=1)  # also catches NaN
         if bad.any():
-            k = int(np.argmax(bad))
-            out.append(result[:k])
-            return "diverged", first + k, np.concatenate(out)
-        out.append(result)
-        state = result[-1]
-    return "ok", steps, np.concatenate(out) if out else np.zeros((0, len(state)))
+            j = int(np.argmax(bad))
+            out[first:first + j] = result[:j]
+            return "diverged", first + j, out[:first + j]
+        out[first:first + k] = result[:k]
+        state[:] = result[k - 1]
+    return "ok", steps, out
 
 
 @lru_cache(maxsize=64)
@@ -432,7 +449,10 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
     @lru_cache(maxsize=8)
     def chunk(nsub: int, jit: bool = False):
         if jit:
-            return _compiled(chunk(nsub), n, m, n_coef + n_numbers) or chunk(nsub)
+            return _compiled(chunk(nsub)) or chunk(nsub)
+        return _whole_chunk(steps(nsub), n, m, n_coef + n_numbers)
+
+    def steps(nsub: int):
         s = [x[i] for i in range(n)]
         for _ in range(nsub):  # the arithmetic of compile_rk4, in its order
             a = rhs(s)
@@ -446,14 +466,22 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
     return chunk
 
 
-def _compiled(run, n: int, m: int, n_params: int):
-    """`run` (a CasADi chunk) as machine code (:mod:`cosim.identify._jit`), or None where no C compiler works."""
+def _whole_chunk(mapped, n: int, m: int, n_params: int):
+    """The mapped RK4 steps `mapped` (their step and parameters repeated per column) as one function of the
+    state, the (m, chunk) inputs, one step and one parameter vector: the arguments :func:`_chunked_run` gives
+    through CasADi's buffer interface, which does not repeat a column as a call does."""
     import casadi as ca
 
+    x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
+    return ca.Function("cosim_rk4", [x, u, h, p], [mapped(x, u, h, p)])
+
+
+def _compiled(run):
+    """`run` (a chunk from :func:`_whole_chunk`) as machine code (:mod:`cosim.identify._jit`), or None where no C
+    compiler works."""
     from ._jit import compiled
 
-    x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
-    return compiled(ca.Function("cosim_rk4", [x, u, h, p], [run(x, u, h, p)]), "cosim_rk4")
+    return compiled(run, "cosim_rk4")
 
 
 def compile_linear_run(ad: np.ndarray):
@@ -468,8 +496,7 @@ def compile_linear_run(ad: np.ndarray):
     params = np.asarray(ad, dtype=float)[pattern]
 
     def run(x0, drive, limit):
-        return _chunked_run(lambda state, held: chunk(state, held, params), x0, np.asarray(drive, dtype=float),
-                            limit)
+        return _chunked_run(chunk, (params,), x0, np.asarray(drive, dtype=float), limit)
 
     return run
 
