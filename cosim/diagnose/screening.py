@@ -77,24 +77,39 @@ _TERM_CACHE = 256
 
 
 def _sample_jacobian(model: IdentifiedModel, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """The Jacobian of the model's right-hand side as a sample-held step sees it: the slope over each sample's
-    own motion (central differences spanning it), (samples, n, n).
+    """The Jacobian of the model's nonlinear terms as a sample-held step sees it: the slope over each sample's
+    own motion (central differences spanning it), (samples, n, n). The linear terms' (the constant, states and
+    inputs) is the model's ``A`` everywhere and is not included.
 
     Not the exact (pointwise) Jacobian: where a term turns sharply (a friction's tanh(v/eps) with eps far below
     the speed change per sample), the pointwise slope times the sample time exceeds 2, the held-over-a-sample
     sensitivity step is unstable and the Gauss-Newton steps built on it wander (measured on a two-mass record
     with Coulomb friction: Fc 0.089 with the exact slope, 0.150 with this one, truth 0.15; and 222 instead of 512
     simulations). The discrete free run itself only sees the slope across each step.
+
+    Only the nonlinear terms are evaluated, and only in the states they use: differencing the whole right-hand
+    side evaluated every term twice per state, a seventh of a 20 000-sample diagnosis.
     """
     n = len(model.states)
-    jac = np.empty((len(x), n, n))
+    jac = np.zeros((len(x), n, n))
+    linear = {"1", *model.states, *model.inputs}
+    used = [k for k, t in enumerate(model.terms) if t not in linear and np.any(model.coef[:, k] != 0.0)]
+    if not used:
+        return jac
+    terms = [Term(model.terms[k]) for k in used]
+    coef = model.coef[:, used]
+    values = {name: u[:, j] for j, name in enumerate(model.inputs)}
+    values.update({name: x[:, i] for i, name in enumerate(model.states)})
     scale = np.maximum(np.abs(x).max(axis=0), 1e-12)
     move = np.abs(np.diff(x, axis=0, append=x[-1:]))
-    for j in range(n):
+    for j, name in enumerate(model.states):
+        mine = [c for c, t in enumerate(terms) if name in t.variables]
+        if not mine:
+            continue
         h = np.maximum(0.5 * move[:, j], 1e-6 * scale[j])
-        step = np.zeros_like(x)
-        step[:, j] = h
-        jac[:, :, j] = (model.predict(x + step, u) - model.predict(x - step, u)) / (2.0 * h[:, None])
+        up = np.column_stack([terms[c].evaluate({**values, name: x[:, j] + h}) for c in mine])
+        down = np.column_stack([terms[c].evaluate({**values, name: x[:, j] - h}) for c in mine])
+        jac[:, :, j] = ((up - down) / (2.0 * h[:, None])) @ coef[:, mine].T
     return jac
 
 
@@ -195,7 +210,7 @@ class OutputErrorScreen:
         if model.is_linear:  # the Jacobian is a0 everywhere
             self.delta_j, self.nonlinear = np.zeros((len(x), n, n)), False
         else:
-            self.delta_j = _sample_jacobian(model, x, u) - a0  # the time-varying rest of the Jacobian
+            self.delta_j = _sample_jacobian(model, x, u)  # the time-varying rest of the Jacobian
             self.nonlinear = bool(np.any(np.abs(self.delta_j) > 1e-9 * max(1.0, float(np.abs(a0).max()))))
         big = np.zeros((2 * n, 2 * n))
         big[:n, :n], big[:n, n:] = a0 * self.dt, np.eye(n) * self.dt
