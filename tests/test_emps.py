@@ -222,7 +222,27 @@ def test_default_path_names_coulomb_then_asymmetry_with_the_published_mass(defau
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="issue 13: the default path's model simulates DATA_EMPS_PULSES.mat with "
-                                       "12.8 mm RMS (target 8 mm); the asymmetry it adds raises it from ~6 mm")
+                                       "12.8 mm RMS (target 8 mm); the asymmetry it adds raises it from ~6 mm, as "
+                                       "it raises the reference's own asymmetric model's to 13.1 mm (next test)")
 def test_default_path_simulates_the_test_record_within_8_mm(emps, records, default_path):
     _, model = default_path
     assert emps["simulation_error_mm"](model, records[1]) <= 8.0
+
+
+@pytest.mark.slow
+def test_default_path_simulates_the_test_record_as_well_as_the_reference_asymmetric_model(emps, records, results,
+                                                                                         default_path):
+    """The issue asks for the asymmetry to be named and for <= 8 mm on the test record; the reference's own
+    asymmetric model (IDIM-LS fitted here: Fv+ 166.8, Fv- 240.2 N s/m, published 166.7 and 240.4) simulates the
+    test record at 13.1 mm, its Coulomb model at 8.3 mm. The asymmetry lowers the train error and raises the
+    test record's for the reference too. The default path's model, with the asymmetry (d = -40.0 N s/m against
+    the published -36.9), does as well as the reference's asymmetric model on the test record, and better on
+    the train record."""
+    _, model = default_path
+    reference = results["asymmetric"]
+    assert reference["simulation_rms_mm"] > 8.0  # the target the issue sets, missed by the reference itself
+    assert emps["simulation_error_mm"](model, records[1]) <= reference["simulation_rms_mm"] + 0.5
+    assert emps["simulation_error_mm"](model, records[0]) <= 1.5 * reference["simulation_rms_mm_train"]
+    d = model.coef[model.states.index("qm_dot")][model.terms.index("abs(qm_dot)")] \
+        / model.coef[model.states.index("qm_dot")][model.terms.index("force")]
+    assert -d == pytest.approx((reference["Fv+"] - reference["Fv-"]) / 2, rel=0.15)  # N s/m, sign: force opposes
