@@ -14,7 +14,7 @@ How
   measured state i, so that states of different units weigh alike. Solved with
   :func:`scipy.optimize.least_squares` (Levenberg-Marquardt), parameters scaled by their starting magnitude.
 * Linear models (terms ``1``, states, inputs) are simulated with the exact zero-order-hold discretisation, the
-  recursion ``x[k+1] = Ad x[k] + d[k]`` evaluated as a parallel prefix scan (``log2(n)`` vectorised passes),
+  recursion ``x[k+1] = Ad x[k] + d[k]`` evaluated as a scan in blocks (about ``2 sqrt(n)`` vectorised calls),
   and the Jacobian is exact: the derivative of ``expm`` (block-triangular form) gives ``dAd, dBd, dcd`` per
   coefficient (a vectorised Taylor ``expm`` of the stack), and the sensitivities obey the same recursion,
   scanned together, computed only when the optimiser asks for the Jacobian. 20 parameters on 10^4
