@@ -21,8 +21,11 @@ state (the simulator's, at rest: the same for both models; a delayed input copy 
 plant saw it), as NRMSE % against the twin's noise-free states,
 averaged over the model's states; "worse" when after exceeds before by more than 0.1 %. The model before is
 model.json for path (b); for path (a), whose CLI does not write it, the same default fit is made in-process
-(SINDYc as cosim/cli/diagnose.py calls it). Wall time: the CLI calls of a path. Failures (a non-zero exit, a
-time-out, unreadable JSON) are counted and listed; a failed record scores as not right.
+(SINDYc as cosim/cli/diagnose.py calls it). When an ``offset`` is named (the base model's constant, kept), the
+model before is that model refitted on the train record without the constant of its dynamic rows, the model the
+diagnosis judged the offset against (the model before has the constant too). Wall time: the CLI calls of a
+path. Failures (a non-zero exit, a time-out, unreadable JSON) are counted and listed; a failed record scores as
+not right.
 
 Results go to benchmarks/results/diagnosis_generalization.json and .md.
 
@@ -206,19 +209,48 @@ def heldout_nrmse(model_path_or_model: Any, folder: Path, spec: dict, cli: dict)
     return 100.0 * float(np.mean(errs))
 
 
-def _model_before_a(folder: Path, cli: dict):
-    """Path (a)'s model before, fitted in-process as ``cosim diagnose`` fits it without --model."""
+def _train_data(folder: Path, cli: dict):
+    """The train record as ``cosim diagnose`` reads it (derived velocities too)."""
     from cosim.data.datafile import load_data
-    from cosim.diagnose.diagnosis import BASE_SETTINGS  # the settings `cosim diagnose` identifies with
-    from cosim.identify.sindyc import SINDYc
 
     states, derived = cli["states"], cli["derive"]
     derived_names = {f"{p}_dot" for p in derived}
     columns = [s for s in states if s not in derived_names] + [cli["input"]]
     roles = {**dict.fromkeys(states, "state"), cli["input"]: "input"}
-    data = load_data(folder / "train.csv", columns=columns, roles=roles, derive=derived).select(
+    return load_data(folder / "train.csv", columns=columns, roles=roles, derive=derived).select(
         [*states, cli["input"]])
-    return SINDYc(**BASE_SETTINGS).fit(data, states=states, inputs=[cli["input"]]).model_
+
+
+def _model_before_a(folder: Path, cli: dict):
+    """Path (a)'s model before, fitted in-process as ``cosim diagnose`` fits it without --model."""
+    from cosim.diagnose.diagnosis import BASE_SETTINGS  # the settings `cosim diagnose` identifies with
+    from cosim.identify.sindyc import SINDYc
+
+    return SINDYc(**BASE_SETTINGS).fit(_train_data(folder, cli), states=cli["states"],
+                                       inputs=[cli["input"]]).model_
+
+
+def _without_constant(model: Any, folder: Path, cli: dict):
+    """`model` refitted on the train record (output error) without the constant of its dynamic rows.
+
+    An ``offset`` finding is the base model's constant kept (``cosim diagnose`` identifies with a constant and
+    judges it last, against the model refitted without it): compared with the model before, which has the
+    constant too, it would measure refit drift only. This is the model it is judged against.
+    """
+    from cosim.diagnose.effects import Roles
+    from cosim.diagnose.screening import output_error_fit
+    from cosim.identify.model import IdentifiedModel
+
+    model = model if isinstance(model, IdentifiedModel) else IdentifiedModel.load(model)
+    if "1" not in model.terms:
+        return model
+    coef = model.coef.copy()
+    for row in Roles.of(model).dynamic_rows:
+        coef[model.states.index(row), model.terms.index("1")] = 0.0
+    reduced = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=coef, dt=model.dt,
+                              meta=model.meta)
+    data = _train_data(folder, cli)
+    return output_error_fit(reduced, {n: data[n] for n in data.names}, data.dt)[0]
 
 
 # ---------------------------------------------------------------------------------------------- one record
@@ -306,16 +338,24 @@ def run_record(index: int, data_dir: str, max_samples: int, paths: tuple[str, ..
         res.update(score(spec, cli, effects, after_path))
         if effects and heldout:
             try:
-                before_model = folder / "model.json" if path == "b" else _model_before_a(folder, cli)
-                res["heldout_before_pct"] = heldout_nrmse(before_model, folder, spec, cli)
-                res["heldout_after_pct"] = heldout_nrmse(after_path, folder, spec, cli)
-                b, a = res["heldout_before_pct"], res["heldout_after_pct"]
-                # a model before that diverges on the twin cannot be made worse
-                res["heldout_worse"] = bool(math.isfinite(b) and a > b * (1 + WORSE_TOLERANCE))
+                res.update(heldout_figures(path, [e["name"] for e in effects], folder, spec, cli))
             except Exception as exc:
                 row["failures"].append({"path": path, "command": "held-out simulation",
                                         "error": f"{type(exc).__name__}: {exc}"})
     return row
+
+
+def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
+    """The held-out NRMSE % before and after a path's findings (its model after, as written in `folder`), and
+    whether they made it worse."""
+    before_model = folder / "model.json" if path == "b" else _model_before_a(folder, cli)
+    if "offset" in named:  # against the model without the constant
+        before_model = _without_constant(before_model, folder, cli)
+    b = heldout_nrmse(before_model, folder, spec, cli)
+    a = heldout_nrmse(folder / f"model_after_{path}.json", folder, spec, cli)
+    # a model before that diverges on the twin cannot be made worse
+    return {"heldout_before_pct": b, "heldout_after_pct": a,
+            "heldout_worse": bool(math.isfinite(b) and a > b * (1 + WORSE_TOLERANCE))}
 
 
 # ---------------------------------------------------------------------------------------------- summary
@@ -486,9 +526,10 @@ def run(indices: list[int], *, out: Path, data_dir: Path, max_samples: int, path
     return result
 
 
-def rescore(path: Path, data_dir: Path, out: Path) -> dict[str, Any]:
+def rescore(path: Path, data_dir: Path, out: Path, offset_heldout: tuple[str, ...] = ()) -> dict[str, Any]:
     """An earlier result re-summarised (with the records' annotations made again from `data_dir`) and written to
-    ``out``.json and .md."""
+    ``out``.json and .md. For the paths in `offset_heldout`, the held-out figures of records with an ``offset``
+    finding are measured again (:func:`heldout_figures`; the records' model_after files must be that run's)."""
     result = json.loads(path.read_text())
     for row in result["rows"]:
         folder = data_dir / f"record_{row['index']:04d}_{result['max_samples']}"
@@ -496,6 +537,11 @@ def rescore(path: Path, data_dir: Path, out: Path) -> dict[str, Any]:
             truth = json.loads((folder / "truth.json").read_text())
             row["record"]["nonlinear"] = nonlinear_part(truth["spec"], truth["cli"], folder)
             row["record"]["linear_equivalent"] = linear_equivalent(truth["spec"], row["record"]["nonlinear"])
+            for p in offset_heldout:  # measured again against the model without the constant
+                res = row.get(p, {})
+                named = [e["name"] for e in res.get("effects", [])]
+                if "offset" in named and (folder / f"model_after_{p}.json").exists():
+                    res.update(heldout_figures(p, named, folder, truth["spec"], truth["cli"]))
     paths = [p for p in ("a", "b") if p in result["summary"]]
     result["summary"] = {p: summarize(result["rows"], p) for p in paths}
     _write(result, out)
@@ -522,13 +568,17 @@ def main() -> None:
     parser.add_argument("--paths", default="a,b")
     parser.add_argument("--timeout", type=float, default=600.0, help="per CLI call, s")
     parser.add_argument("--cosim", default=shutil.which("cosim", path=str(Path(sys.executable).parent)) or "cosim")
+    parser.add_argument("--offset-heldout", default="", metavar="PATHS",
+                        help="with --rescore: measure the held-out figures of offset findings again for these paths "
+                             "(e.g. 'a'; the records' model_after files must be from that result's run)")
     parser.add_argument("--rescore", default=None, metavar="JSON",
                         help="re-summarise an earlier result file (its records kept in --data) instead of running")
     args = parser.parse_args()
     indices = _parse_slice(args.slice, args.n)
     data = Path(args.data) if args.data else Path(os.environ.get("TMPDIR", "/tmp")) / "cosim-diagnosis-records"
     if args.rescore:
-        print(markdown(rescore(Path(args.rescore), data, Path(args.out) / "diagnosis_generalization")))
+        again = tuple(p.strip() for p in args.offset_heldout.split(",") if p.strip())
+        print(markdown(rescore(Path(args.rescore), data, Path(args.out) / "diagnosis_generalization", again)))
         return
     result = run(indices, out=Path(args.out) / "diagnosis_generalization", data_dir=data,
                  max_samples=args.max_samples, paths=tuple(p.strip() for p in args.paths.split(",")),
