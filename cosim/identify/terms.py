@@ -449,7 +449,9 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
     @lru_cache(maxsize=8)
     def chunk(nsub: int, jit: bool = False):
         if jit:
-            return _compiled(chunk(nsub)) or chunk(nsub)
+            from ._jit import compiled  # machine code, or None where no C compiler works
+
+            return compiled(chunk(nsub), "cosim_rk4") or chunk(nsub)
         return _whole_chunk(steps(nsub), n, m, n_coef + n_numbers)
 
     def steps(nsub: int):
@@ -474,14 +476,6 @@ def _whole_chunk(mapped, n: int, m: int, n_params: int):
 
     x, u, h, p = ca.MX.sym("x", n), ca.MX.sym("u", m, _CASADI_CHUNK), ca.MX.sym("h"), ca.MX.sym("p", n_params)
     return ca.Function("cosim_rk4", [x, u, h, p], [mapped(x, u, h, p)])
-
-
-def _compiled(run):
-    """`run` (a chunk from :func:`_whole_chunk`) as machine code (:mod:`cosim.identify._jit`), or None where no C
-    compiler works."""
-    from ._jit import compiled
-
-    return compiled(run, "cosim_rk4")
 
 
 def compile_linear_run(ad: np.ndarray):
