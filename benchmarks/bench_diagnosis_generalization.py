@@ -66,9 +66,11 @@ WORSE_TOLERANCE = 1e-3  # held-out NRMSE after > before * (1 + this): the effect
 
 # ---------------------------------------------------------------------------------------------- records
 def prepare(index: int, data_dir: Path, max_samples: int) -> Path:
-    """The folder of record `index`, generated unless already there (truth.json is written last)."""
+    """The folder of record `index`, generated unless already there from this version of the generator
+    (truth.json is written last)."""
     folder = data_dir / f"record_{index:04d}_{max_samples}"
-    if not (folder / "truth.json").is_file():
+    truth = folder / "truth.json"
+    if not truth.is_file() or json.loads(truth.read_text()).get("generator") != ip.GENERATOR_VERSION:
         ip.make_record(index, max_samples=max_samples).write(folder)
     return folder
 
@@ -265,8 +267,9 @@ def nonlinear_part(spec: dict, cli: dict, folder: Path) -> dict[str, float]:
     return {e["name"]: e["ratio"] * share[e["name"]] for e in spec["effects"] if e["name"] in share}
 
 
-#: An effect whose force a linear model takes up to this share (RMS) is a linear change over the record.
-LINEAR_SHARE = 1e-3
+#: An effect whose force a linear model takes up to this share (RMS) is a linear change over the record (the
+#: generator draws such an effect again; records of its first version had them).
+LINEAR_SHARE = ip.LINEAR_SHARE
 
 
 def linear_equivalent(spec: dict, nonlinear: dict[str, float]) -> str | None:

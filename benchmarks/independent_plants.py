@@ -34,6 +34,13 @@ Effects (named as cosim's catalogue names them; the main parameter, compared wit
     logarithm of its parameter) so that its contribution, the RMS difference of the written signals between
     runs with and without it (same input; same reference in closed loop), is a drawn 3-12 times the noise's
     standard deviation (accepted in 2-20), taken per signal and averaged in square.
+    An effect the record cannot show as itself is replaced, as one out of reach of the calibration is, by
+    another drawn at random (four tries in all), so that the table scores diagnoses, not records no tool could
+    answer: a linear model must not take up its whole force over the record (the share it leaves,
+    :func:`nonlinear_share`, is above :data:`LINEAR_SHARE`: a dead zone under an input of one magnitude is a
+    gain, a Coulomb friction above every command a viscous one), and a cogging's position must turn through at
+    least :data:`MIN_PERIODS` of its periods (the issue's floor for a periodic candidate; a strong cogging can
+    trap the plant in one well).
 
 Records
     200 Hz-5 kHz, 5-60 s (a record longer than ``max_samples`` is shortened, then its rate lowered, never
@@ -76,6 +83,12 @@ MAIN_PARAMETER = {"coulomb_friction": "Fc", "stribeck": "Fs", "viscous_asymmetry
 DEFAULT_MAX_SAMPLES = 30_000
 RATIO_TARGET = (3.0, 12.0)  # the drawn contribution / noise
 RATIO_ACCEPT = (2.0, 20.0)
+#: An effect whose force a linear model takes up to this share (RMS) is a linear change over the record.
+LINEAR_SHARE = 1e-3
+#: Least periods of a cogging over its position's range in the record.
+MIN_PERIODS = 2.0
+#: Written into truth.json; a record of another version is generated again.
+GENERATOR_VERSION = 2
 
 
 # ---------------------------------------------------------------------------------------------- plants
@@ -308,7 +321,8 @@ class Record:
             tmp.replace(folder / f"{name}.csv")
         np.savez(folder / "heldout_clean.npz", **self.heldout_clean)
         tmp = folder / ".truth.json.tmp"
-        tmp.write_text(json.dumps({"index": self.index, "spec": self.spec, "cli": self.cli}, indent=1) + "\n")
+        tmp.write_text(json.dumps({"index": self.index, "generator": GENERATOR_VERSION, "spec": self.spec,
+                                   "cli": self.cli}, indent=1) + "\n")
         tmp.replace(folder / "truth.json")
         return folder
 
@@ -486,6 +500,21 @@ def _calibrate(run: _Run, base: np.ndarray, name: str, placed: dict, ctx: dict, 
     return effect(s), ratio
 
 
+def _not_shown(run: _Run, eff: dict) -> str | None:
+    """Why the record could not show `eff` as itself (see Effects in the module notes), or None."""
+    states, cmd = run.run([eff])
+    plant = run.plant
+    clean = {**{s: states[:, i] for i, s in enumerate(plant.states)}, plant.input: np.append(cmd, cmd[-1])}
+    if eff["name"] == "cogging":
+        turns = eff["params"]["periods"] * float(np.ptp(clean[eff["at"]])) / (2 * math.pi)
+        if turns < MIN_PERIODS:
+            return f"its position turns through {turns:.2g} periods"
+    share = nonlinear_share({"plant": {"kind": plant.kind, **plant.p}, "effects": [eff]}, clean)
+    if eff["name"] in share and share[eff["name"]] <= LINEAR_SHARE:
+        return f"a linear model takes up all but {share[eff['name']]:.2g} of its force"
+    return None
+
+
 def _draw_sizes(rng: np.random.Generator, max_samples: int) -> tuple[float, float, int]:
     rate = _loguniform(rng, 200.0, 5000.0)
     duration = _loguniform(rng, 5.0, 60.0)
@@ -555,11 +584,15 @@ def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES) -> Record
                         "phase": rng.uniform(0, 2 * np.pi), "sign": float(rng.choice([-1.0, 1.0]))})
             target = _loguniform(rng, *RATIO_TARGET)
             eff, ratio = _calibrate(run, base, name, {"at": at, "row": row}, ctx, target, n_cal)
-            if eff is not None:
+            unseen = _not_shown(run, eff) if eff is not None else None
+            if unseen is not None:
+                rejected.append({"name": name, "not_shown": unseen})
+            elif eff is not None:
                 effects.append(eff)
                 ratios.append(ratio)
                 break
-            rejected.append({"name": name, "ratio_reached": ratio})
+            else:
+                rejected.append({"name": name, "ratio_reached": ratio})
             name = str(rng.choice([e for e in (SINGLE_EFFECTS if plant.kind == "single" else EFFECT_NAMES)
                                    if e not in [x["name"] for x in effects]]))
     final, cmd_final = run.run(effects) if effects else (base, cmd)

@@ -104,3 +104,28 @@ def test_nonlinear_share_of_an_effects_force(effect, share):
     small = ip.nonlinear_share(spec, {"x": 0.1 * np.sin(2 * np.pi * t), "v": np.cos(t), "u": u})["gravity"]
     large = ip.nonlinear_share(spec, {"x": 2.0 * np.sin(2 * np.pi * t), "v": np.cos(t), "u": u})["gravity"]
     assert small < 0.002 < 0.05 < large
+
+
+def test_an_effect_a_linear_model_takes_up_whole_is_drawn_again():
+    # a dead zone of 0.5 under a command of +-2 only: the plant sees +-1.5, a gain; a wider-ranging command
+    # shows it
+    plant = ip.Plant("single", {"m": 1.0, "b": 1.0, "k": 0.0})
+    dt, n = 1e-2, 400
+    two_level = 2.0 * np.sign(np.sin(2 * np.pi * 0.5 * np.arange(n) * dt))
+    ramp = np.linspace(-2.0, 2.0, n)
+    dead = {"name": "deadzone", "at": "u", "row": None, "params": {"width": 0.5}}
+    assert "linear model" in ip._not_shown(ip._Run(plant, dt, n, two_level, None, None, ["x", "v"]), dead)
+    assert ip._not_shown(ip._Run(plant, dt, n, ramp, None, None, ["x", "v"]), dead) is None
+
+
+def test_a_cogging_its_position_never_turns_two_periods_of_is_drawn_again():
+    plant = ip.Plant("single", {"m": 1.0, "b": 1.0, "k": 0.0})
+    dt, n = 1e-2, 400
+    u = np.full(n, 1.0)  # x travels about 3 m in 4 s
+    run = ip._Run(plant, dt, n, u, None, None, ["x", "v"])
+    travel = float(np.ptp(run.run([])[0][:, 0]))
+    few = {"name": "cogging", "at": "x", "row": "v", "params": {"amplitude": 0.05, "periods": 3.0 / travel,
+                                                                 "phase": 0.0}}
+    many = {**few, "params": {**few["params"], "periods": 30.0 / travel}}
+    assert "periods" in ip._not_shown(run, few)
+    assert ip._not_shown(run, many) is None
