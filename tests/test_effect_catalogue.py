@@ -64,6 +64,29 @@ def test_cogging_is_not_tried_where_the_record_cannot_show_it():
     assert EFFECTS["cogging"].grid(attachment("p"), {"p": p}, band) == []
 
 
+def test_cogging_range_is_the_measured_one_when_the_free_run_moves_less():
+    # a poor base model's free run turns through 0.5 rad where the plant turned through 3 (noise 0.01 each
+    # side): two periods over 3 - 4 x 0.01 rad, not over 0.5
+    free = slew(0.5, 2.0)
+    measured = slew(3.0, 2.0) + 0.01 * np.random.default_rng(0).standard_normal(4000)
+    band = RecordBand.of({"p": free}, DT, {"p": 0.01}, measured={"p": measured})
+    assert band.measured_ranges["p"] == pytest.approx(np.ptp(measured) - 0.04)
+    lo, _ = EFFECTS["cogging"].nuisance_span(attachment("p"), {"p": free}, band)
+    assert lo == math.ceil(4 * math.pi / (np.ptp(measured) - 0.04)) < math.ceil(4 * math.pi / 0.5)
+
+
+def test_cogging_resonance_limit_holds_at_the_median_speed():
+    # half the record creeping at 0.1 rad/s, a tenth sweeping at 10 rad/s: a ripple of n periods per rad is at
+    # n * 0.1 / (2 pi) Hz for half the record, whatever it is at the top speed
+    speed = np.r_[np.full(2400, 0.1), np.full(1200, 1.0), np.full(400, 10.0)]
+    p = np.cumsum(speed) * DT
+    band = RecordBand(dt=DT, samples=p.size, visible={"p": 2.0})
+    _, hi = rb.periodic_span(p, band, "p")
+    median = float(np.median(rb.speed_of(p, band)))
+    assert hi == math.floor(2.0 * 2 * math.pi / median)
+    assert hi > math.floor(2.0 * 2 * math.pi / rb.typical_speed(rb.speed_of(p, band)))  # the old, top-speed cap
+
+
 def test_gravity_needs_the_angle_to_turn():
     band = RecordBand.of({}, DT)
     assert EFFECTS["gravity"].grid(attachment("p"), {"p": slew(0.3, 1.0)}, band) == []

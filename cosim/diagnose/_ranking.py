@@ -154,7 +154,8 @@ def record_band(screen: OutputErrorScreen) -> RecordBand:
     visible bands (through the model), with the ranges of the free run's signals (the nuisance grids are scaled
     on the noise-free free run)."""
     return RecordBand.of(screen.free_run, screen.dt, dict(zip(screen.model.states, map(float, screen.sigma),
-                                                                strict=True)), model=screen.model)
+                                                                strict=True)), model=screen.model,
+                         measured={s: screen.columns[s] for s in screen.measured})
 
 
 def _round(screen: OutputErrorScreen, names: Sequence[str] | EffectSelection, alpha: float, bic_margin: float,

@@ -5,11 +5,15 @@ An effect's nuisance grid comes from the physics of the record, not from fixed n
 can be told from the data (None: the effect cannot be identified at that place) and the grid over it:
 
 * **periodic in a position** (cogging, ``n`` periods per radian on ``p``): the torque's frequency at the typical
-  speed, ``n |v|_90 / (2 pi)``, stays below ``0.8`` of the Nyquist frequency and below :data:`RESONANCE_FACTOR`
-  times the model's fastest resonance, if it has one (:func:`visible_band`), and the position's range holds at
-  least two periods (``n ptp(p) / (2 pi) >= 2``). The grid is uniform, at the record's resolution in ``n``
-  (``pi / ptp(p)``: two neighbours stay 90 % correlated along the range), at most :data:`PERIODIC_POINTS`
-  values. Gravity (one period per ``2 pi``) needs the angle to turn through :data:`GRAVITY_MIN_RANGE`;
+  speed, ``n |v|_90 / (2 pi)``, stays below ``0.8`` of the Nyquist frequency; at the median speed while moving
+  (above :data:`MOVING_SHARE` of the typical speed) it stays below
+  :data:`RESONANCE_FACTOR` times the model's fastest resonance, if it has one (:func:`visible_band`: the ripple
+  must pass the plant for half the record at least, not at its top speed); and the position's range holds at
+  least two periods (``n ptp(p) / (2 pi) >= 2``; the range is the free run's, or the measured one less four
+  noise levels where that is larger: a poor base model's free run can move less than the plant). The grid is
+  uniform, at the record's resolution in ``n`` (``pi / ptp(p)``: two neighbours stay 90 % correlated along the
+  range), at most :data:`PERIODIC_POINTS` values. Gravity (one period per ``2 pi``) needs the angle to turn
+  through :data:`GRAVITY_MIN_RANGE`;
 * **Stribeck velocity** ``vs``: between :data:`STRIBECK_NOISE` noise levels of the velocity (and the speed step
   per sample at a reversal) and a third of the largest speed, keeping only values where at least
   :data:`MIN_SHARE` of the samples move slower than ``2 vs`` and as many faster;
@@ -40,6 +44,8 @@ RESONANCE_FACTOR = 10.0
 MIN_PERIODS = 2.0
 #: Percentile of the speed that stands for the typical speed.
 SPEED_PERCENTILE = 90.0
+#: Samples slower than this share of the typical speed stand still (they show no ripple at any period).
+MOVING_SHARE = 0.01
 #: Most values of a periodic effect's grid (the lowest periods at the record's resolution).
 PERIODIC_POINTS = 64
 #: Least range of an angle (rad) for gravity (one period per 2 pi): below it sin and cos are a line and a constant.
@@ -72,6 +78,10 @@ class RecordBand:
     visible : dict
         Per position, the highest frequency (Hz) a periodic effect on it may have besides the Nyquist band
         (:func:`visible_band`; a position not named has no such limit).
+    measured_ranges : dict
+        Peak-to-peak range of each measured signal less four noise levels (what the noise adds at the two
+        ends): the plant's range where the model's free run, from which the other figures come, moves less than
+        the plant did.
     """
 
     dt: float | None
@@ -79,18 +89,24 @@ class RecordBand:
     noise: Mapping[str, float] = field(default_factory=dict)
     ranges: Mapping[str, float] = field(default_factory=dict)
     visible: Mapping[str, float] = field(default_factory=dict)
+    measured_ranges: Mapping[str, float] = field(default_factory=dict)
 
     @classmethod
     def of(cls, columns: Mapping[str, np.ndarray], dt: float | None = None,
-           noise: Mapping[str, float] | None = None, model: Any = None) -> RecordBand:
+           noise: Mapping[str, float] | None = None, model: Any = None,
+           measured: Mapping[str, np.ndarray] | None = None) -> RecordBand:
         """The band of a record (`columns`, sampled at `dt`) with its states' `noise` levels; `model` (an
-        :class:`~cosim.identify.model.IdentifiedModel`) gives each position's visible band."""
+        :class:`~cosim.identify.model.IdentifiedModel`) gives each position's visible band, `measured` (the
+        measured signals, where `columns` is a model's free run) the measured ranges."""
         arrays = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
         samples = max((a.size for a in arrays.values()), default=0)
         ranges = {k: float(np.ptp(a)) if a.size else 0.0 for k, a in arrays.items()}
         visible = visible_band(model, arrays, dict(noise or {}), dt) if model is not None else {}
-        return cls(dt=float(dt) if dt else None, samples=int(samples), noise=dict(noise or {}), ranges=ranges,
-                   visible=visible)
+        levels = dict(noise or {})
+        spans = {k: max(float(np.ptp(a)) - 4.0 * levels.get(k, 0.0), 0.0)
+                 for k, a in ((k, np.asarray(v, dtype=float)) for k, v in (measured or {}).items()) if a.size}
+        return cls(dt=float(dt) if dt else None, samples=int(samples), noise=levels, ranges=ranges,
+                   visible=visible, measured_ranges=spans)
 
     @property
     def duration(self) -> float | None:
@@ -165,14 +181,21 @@ def log_grid(lo: float, hi: float, step: float = LOG_STEP) -> list[float]:
 def periodic_span(position: np.ndarray, band: RecordBand, name: str = "") -> tuple[float, float] | None:
     """Periods per unit of position that the record can show (see the module notes), or None."""
     p = np.asarray(position, dtype=float)
-    extent = float(np.ptp(p)) if p.size else 0.0
+    extent = max(float(np.ptp(p)) if p.size else 0.0, band.measured_ranges.get(name, 0.0))
     if not extent > 0.0:
         return None
     lo = max(1.0, math.ceil(MIN_PERIODS * 2 * math.pi / extent - 1e-9))
-    speed = typical_speed(speed_of(p, band))
-    top = min(NYQUIST_SHARE * band.nyquist, band.visible.get(name, math.inf))
-    hi = math.floor(top * 2 * math.pi / speed) if speed > 0 and math.isfinite(top) else math.inf
+    speed = speed_of(p, band)
+    top = typical_speed(speed)
+    moving = speed[speed > MOVING_SHARE * top]
+    hi = min(_periods_below(NYQUIST_SHARE * band.nyquist, top),
+             _periods_below(band.visible.get(name, math.inf), float(np.median(moving)) if moving.size else 0.0))
     return (float(lo), float(hi)) if lo <= hi else None
+
+
+def _periods_below(frequency: float, speed: float) -> float:
+    """The most periods per unit of position whose ripple stays below `frequency` (Hz) at `speed`."""
+    return math.floor(frequency * 2 * math.pi / speed) if speed > 0 and math.isfinite(frequency) else math.inf
 
 
 def periodic_grid(lo: float, hi: float, position: np.ndarray) -> list[float]:
