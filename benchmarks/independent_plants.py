@@ -526,8 +526,10 @@ def _draw_sizes(rng: np.random.Generator, max_samples: int) -> tuple[float, floa
     return 1.0 / rate, duration, n
 
 
-def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES) -> Record:
-    """Record `index` (seed `index`): plant, effects calibrated to 2-20x the noise, training data and twin."""
+def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_only: bool = True) -> Record:
+    """Record `index` (seed `index`): plant, effects calibrated to 2-20x the noise, training data and twin.
+
+    ``shown_only=False`` keeps an effect the record cannot show as itself (the first version's records)."""
     rng = np.random.default_rng([index, 0])
     dt, duration, n = _draw_sizes(rng, max_samples)
     rate = 1.0 / dt
@@ -584,7 +586,7 @@ def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES) -> Record
                         "phase": rng.uniform(0, 2 * np.pi), "sign": float(rng.choice([-1.0, 1.0]))})
             target = _loguniform(rng, *RATIO_TARGET)
             eff, ratio = _calibrate(run, base, name, {"at": at, "row": row}, ctx, target, n_cal)
-            unseen = _not_shown(run, eff) if eff is not None else None
+            unseen = _not_shown(run, eff) if eff is not None and shown_only else None
             if unseen is not None:
                 rejected.append({"name": name, "not_shown": unseen})
             elif eff is not None:
