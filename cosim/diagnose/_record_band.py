@@ -103,8 +103,8 @@ class RecordBand:
         ranges = {k: float(np.ptp(a)) if a.size else 0.0 for k, a in arrays.items()}
         visible = visible_band(model, arrays, dict(noise or {}), dt) if model is not None else {}
         levels = dict(noise or {})
-        spans = {k: max(float(np.ptp(a)) - 4.0 * levels.get(k, 0.0), 0.0)
-                 for k, a in ((k, np.asarray(v, dtype=float)) for k, v in (measured or {}).items()) if a.size}
+        spans = {k: max(float(np.ptp(v)) - 4.0 * levels.get(k, 0.0), 0.0)
+                 for k, v in (measured or {}).items() if np.size(v)}
         return cls(dt=float(dt) if dt else None, samples=int(samples), noise=levels, ranges=ranges,
                    visible=visible, measured_ranges=spans)
 
