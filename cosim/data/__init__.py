@@ -5,6 +5,8 @@
 * :mod:`~cosim.data.datafile` - :func:`load_data` for measured files (CSV, Parquet, ``.mat``) with column
   expressions, and :func:`check_excitation`;
 * :mod:`~cosim.data.derivatives` - derivative estimation (:func:`differentiate`, :data:`DERIVATIVE_METHODS`);
+* :mod:`~cosim.data.decimation` - a signal's band above its noise (:func:`signal_bandwidth`) and a record at a
+  lower rate (:func:`decimate`);
 * :mod:`~cosim.data.signals` - excitation signals (square, sine, PRBS, chirp, multisine...) and their specs;
 * :mod:`~cosim.data.simulation` - :func:`simulate`: an FMU driven by signals, recorded as a Trajectory;
 * :mod:`~cosim.data.plots` - :func:`plot_trajectory`.
@@ -19,6 +21,7 @@ Imports the plant room and the foundation only.
 from __future__ import annotations
 
 from .datafile import MIN_SAMPLES, UNIFORM_RTOL, check_excitation, load_data
+from .decimation import decimate, signal_bandwidth
 from .derivatives import DERIVATIVE_METHODS, differentiate
 from .plots import plot_trajectory
 from .signals import (
@@ -50,7 +53,8 @@ from .trajectory import ROLES, Trajectory
 __all__ = [
     "Chirp", "Constant", "DERIVATIVE_METHODS", "InputSpec", "MIN_SAMPLES", "Multisine", "Prbs", "ROLES",
     "SIGNAL_KINDS", "ScaledSignal", "Signal", "SignalKind", "SignalSum", "SineWave", "SquareWave", "Step",
-    "Trajectory", "UNIFORM_RTOL", "check_excitation", "chirp", "constant", "differentiate", "load_data",
-    "multisine", "parse_signal", "plot_trajectory", "prbs", "sample_input", "signal_kinds_help", "simulate", "sine",
+    "Trajectory", "UNIFORM_RTOL", "check_excitation", "chirp", "constant", "decimate", "differentiate", "load_data",
+    "multisine", "parse_signal", "plot_trajectory", "prbs", "sample_input", "signal_bandwidth", "signal_kinds_help",
+    "simulate", "sine",
     "square", "step",
 ]

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, InvalidSettingError
+from ._spectrum import signal_spectrum
 
 __all__ = ["differentiate", "savgol_window", "DERIVATIVE_METHODS"]
 
@@ -38,19 +39,6 @@ def _check_int(name: str, value: Any, low: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
         raise InvalidSettingError(f"{name} must be an integer >= {low}, got {value!r}")
     return int(value)
-
-
-def _noise_variance(x: np.ndarray) -> float:
-    """Variance of white noise on `x` from its fourth differences (robust: median absolute deviation).
-
-    A fourth difference of white noise has variance ``70 sigma^2``; of a smooth signal sampled fast it is tiny,
-    and the median makes the few large ones (steps, kinks) count as outliers, not as noise.
-    """
-    if x.size < 9:
-        return 0.0
-    d = np.diff(x, n=4)
-    mad = float(np.median(np.abs(d - np.median(d))))
-    return (1.4826 * mad) ** 2 / 70.0
 
 
 def savgol_window(x: Sequence[float] | np.ndarray, dt: float, *, polyorder: int = 3, deriv: int = 1) -> int:
@@ -100,8 +88,7 @@ def savgol_window(x: Sequence[float] | np.ndarray, dt: float, *, polyorder: int 
     >>> 100 < savgol_window(noisy, 1e-3) < 500
     True
     """
-    from scipy.signal import savgol_coeffs, welch
-    from scipy.stats import chi2
+    from scipy.signal import savgol_coeffs
 
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not (math.isfinite(dt) and dt > 0):
         raise InvalidSettingError(f"dt must be a positive time step in s, got {dt!r}")
@@ -115,18 +102,8 @@ def savgol_window(x: Sequence[float] | np.ndarray, dt: float, *, polyorder: int 
     shortest = polyorder + 2 - (polyorder % 2 == 0)     # the shortest odd window above polyorder
     if n <= shortest:
         return shortest
-    sigma2 = _noise_variance(x)
-    y = np.diff(x)
-    nper = int(min(y.size, 2 ** math.ceil(math.log2(max(y.size / 8, 64)))))
-    f, pyy = welch(y, fs=1.0 / dt, nperseg=nper, detrend="linear")
-    f, pyy = f[1:], pyy[1:]
-    gain = 4.0 * np.sin(np.pi * f * dt) ** 2           # |1 - exp(-i w dt)|^2: differencing
-    floor = 2.0 * sigma2 * dt * gain                     # the white noise's one-sided density after differencing
-    dof = 2.0 * max(y.size / nper, 1.0)
-    keep = pyy > floor * (chi2.ppf(1.0 - 0.01 / max(f.size, 1), dof) / dof)
-    freq = f[keep]
-    density = (pyy[keep] - floor[keep]) / gain[keep]     # the signal's own spectrum
-    df = float(f[1] - f[0]) if f.size > 1 else 1.0 / (n * dt)
+    spectrum = signal_spectrum(x, dt)
+    sigma2, freq, density, df = spectrum.noise_variance, spectrum.freq, spectrum.density, spectrum.df
     ideal = (2j * np.pi * freq) ** deriv
     longest = max(shortest, n // 2 - (n // 2 + 1) % 2)
     candidates = np.unique((np.geomspace(shortest, longest, _WINDOW_CANDIDATES) // 2 * 2 + 1).astype(int))
