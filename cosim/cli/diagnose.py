@@ -46,6 +46,10 @@ DIAGNOSE_MIN_SAMPLES = 200
 @click.option("--noise", default=None, metavar="STATE=LEVEL,...",
               help="A state's noise level, e.g. its sensor's resolution 'qm=5e-6', instead of the estimate from "
                    "the data.")
+@click.option("--decimate", default="auto", show_default=True, metavar="auto|N",
+              help="Search at the record's step times N (measured signals low-pass filtered, inputs averaged), then "
+                   "refit at the record's own step; auto: down to ten times the record's band on records of more "
+                   "than 4000 samples; 1: never.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), default=None,
@@ -56,7 +60,8 @@ DIAGNOSE_MIN_SAMPLES = 200
 def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, model_path: str | None, effects: str,
                      derive: str | None, derive_window: int | None, kinematics: str, time_column: str | None,
                      resample: bool,
-                     max_effects: int, initial_state: str, noise: str | None, report_path: str | None,
+                     max_effects: int, initial_state: str, noise: str | None, decimate: str,
+                     report_path: str | None,
                      out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
 
@@ -94,6 +99,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                             f"{DIAGNOSE_MIN_SAMPLES}; use a longer record")
         records.append(data)
     selection = effect_selection(effects)  # names checked now; fixed values against the data in diagnose()
+    factor = _decimate_option(decimate)
     found_rows = ""
     if model_path:
         model = IdentifiedModel.load(model_path)
@@ -106,7 +112,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     levels = {name: parse_number(text, what=f"--noise {name}")
               for name, text in _pairs(tuple(noise.split(",")), "--noise").items()} if noise else None
     report = diagnose(model, records if len(records) > 1 else records[0], effects=selection,
-                      max_effects=max_effects, x0=initial_state, noise=levels)
+                      max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor)
     payload = report.to_dict()
     if report_path:
         payload["report"] = str(report.write_report(report_path))
@@ -126,10 +132,27 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                      f"{c.explained.get('held_out_nrmse_with_pct', float('nan')):.4g} % with it")
     if report.dropped_terms:
         lines.append("  terms no longer needed: " + ", ".join(report.dropped_terms))
+    rate = report.analysis
+    if rate.get("decimation", 1) > 1:
+        lines.append(f"  searched at {1.0 / rate['dt']:.4g} Hz (the records decimated by {rate['decimation']}), "
+                     f"refitted at their own {1.0 / rate['record_dt']:.4g} Hz")
     lines.append(f"  before: NRMSE {report.before['nrmse_pct']:.4g} %, R2 {report.before['r2']:.6g}; "
                  f"after: NRMSE {report.after['nrmse_pct']:.4g} %, R2 {report.after['r2']:.6g}")
     lines += [f"{k}: {payload[k]}" for k in ("report", "model") if k in payload]
     _emit(as_json, payload, "\n".join(lines))
+
+
+def _decimate_option(text: str) -> int | str:
+    """``--decimate``: "auto" or a positive integer (a one-line error otherwise)."""
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        factor = int(text)
+    except ValueError:
+        factor = 0
+    if factor < 1:
+        raise InvalidSettingError(f"--decimate must be auto or a positive integer, got {text!r}")
+    return factor
 
 
 def _kinematics_option(text: str, states: list[str]) -> str | dict[str, str]:

@@ -68,9 +68,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from ..data.decimation import decimate as decimate_record
+from ..data.decimation import noise_gain
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..identify.model import IdentifiedModel
+from ._analysis_rate import analysis_factor, at_record_rate
 from ._holdout import HeldOutCheck
 from ._ranking import _round, check_effect_selection, record_band
 from ._starts import trial_fit
@@ -225,7 +228,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
              effects: str | Sequence[str] = "all", max_effects: int = 3, alpha: float = ALPHA,
              bic_margin: float = BIC_MARGIN, min_size: float = MIN_SIZE, reference: Trajectory | None = None,
              x0: str | Sequence[float] = "estimate", noise: Mapping[str, float] | None = None,
-             held_out: bool = True, progress: bool | None = None) -> DiagnosisReport:
+             held_out: bool = True, decimate: int | str = "auto", progress: bool | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
@@ -261,6 +264,13 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
         Accept an effect only if it also lowers the free-run error on data held out from its fit (two folds:
         each half of every record fitted, the other half predicted; :mod:`~cosim.diagnose._holdout`). A
         candidate that wins in-sample but not held out is reported in ``rejected``, with its figures.
+    decimate : "auto" or int
+        The search (screening, trial fits, held-out checks) runs on the records decimated by this factor
+        (:func:`~cosim.data.decimation.decimate`: measured signals low-pass filtered, inputs averaged over each
+        step), and its result is refitted at the records' own step, which the parameters and figures are of.
+        ``"auto"``: a record of more than 4000 samples sampled faster than ten times its band (the highest
+        frequency its states show above their noise, or the model's fastest mode) is brought down to that
+        rate, never below 4000 samples (:mod:`~cosim.diagnose._analysis_rate`); 1: the records as they are.
     progress : bool or None
         A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
 
@@ -273,28 +283,35 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
                          min_size=min_size, reference=reference, x0=x0, noise=noise, held_out=held_out,
-                         progress=progress)
+                         decimate=decimate, progress=progress)
 
 
 def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *, effects: str | Sequence[str],
               max_effects: int, alpha: float, bic_margin: float, min_size: float, reference: Trajectory | None,
               x0: str | Sequence[float], noise: Mapping[str, float] | None, held_out: bool,
-              progress: bool | None) -> DiagnosisReport:
-    records = _records(model, data)
+              decimate: int | str, progress: bool | None) -> DiagnosisReport:
+    given = _records(model, data)
+    factor = analysis_factor(model, given, decimate, min_samples=MIN_SAMPLES)
+    records = [decimate_record(r, factor, held=model.inputs) for r in given]  # (as given for factor 1)
     columns, starts = _columns(model, records)
-    names = effect_names(check_effect_selection(effects, model, columns, records[0].dt, noise))
+    given_columns, given_starts = _columns(model, given)
+    names = effect_names(check_effect_selection(effects, model, given_columns, given[0].dt, noise))
     for name in model.inputs:
-        if np.ptp(columns[name]) == 0.0:
+        if np.ptp(given_columns[name]) == 0.0:
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
     segments = starts if len(records) > 1 else None
-    start = _initial_state(model, records, x0)
+    start = _initial_state(model, given, x0)
     fit = _FitOptions(estimate_x0=start is None, noise=_noise(model, noise), segments=segments,
-                      measured=_measured(model, records, noise))
+                      measured=_measured(model, given, noise))
+    given_fit = replace(fit, segments=given_starts if segments is not None else None)
+    if factor > 1:  # the noise levels of the records as given, less what the decimation's filter took off
+        fit = replace(fit, noise=dict(zip(model.states, (_sigma(model, given_columns, given_fit) *
+                                                         math.sqrt(noise_gain(factor))).tolist(), strict=True)))
     first = records[0]
     # the base at its own output-error optimum, so that a candidate's trial fit gains only what it adds
     current = output_error_fit(model, columns, first.dt, x0=start, **fit.kw)[0]
-    res_before = residuals(model, first, x0="estimate" if start is None else _first_x0(start))
-    truth = [reference] if reference is not None else records
+    res_before = residuals(model, given[0], x0="estimate" if start is None else _first_x0(start))
+    truth = [reference] if reference is not None else given
     before = _figures_of(model, truth, res_before, start, refitted=None)
     sigma = dict(zip(model.states, _sigma(model, columns, fit).tolist(), strict=True))
     check = HeldOutCheck(columns, starts, first.dt, sigma, fit.estimate_x0, fit.measured) if held_out else None
@@ -360,6 +377,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         steps.append((tuple(c.name for c in accepted), current))
     bar.close()
     _set_gain(check, accepted)
+    without = None  # the model without the base's constant, when an offset is all that is found
     if "offset" in names and len(accepted) < max_effects:
         # the base's own constant, judged as an effect once the rounds are over (see _base_offset)
         offset = _base_offset(current, columns, dt, nuisances, alpha, bic_margin, min_size, fit, check)
@@ -382,8 +400,19 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             steps.append((tuple(c.name for c in accepted), current))
             if len(accepted) == 1:  # the offset alone: "before" is the model without it, not the base that had it
                 without = offset[2]
-                res_before = residuals(without, first, x0=_first_x0(_fitted_x0(without, segments)))
-                before = _figures_of(without, truth, res_before, None, refitted=without)
+    if factor > 1:  # the search's result at the records' own step
+        if accepted:
+            current, accepted, nuisances, added = at_record_rate(current, accepted, nuisances, given_columns,
+                                                                 given[0].dt, given_fit, factor)
+            _write_back(accepted, owners, nuisances)
+            given_columns = {**given_columns, **added}
+        if without is not None:  # (refitted there too: before and after are then alike)
+            without = at_record_rate(without, [], [], given_columns, given[0].dt, given_fit, factor)[0]
+        columns, starts = given_columns, given_starts
+    if without is not None:
+        res_before = residuals(without, given[0], x0=_first_x0(_fitted_x0(without, segments)))
+        before = _figures_of(without, truth, res_before, None, refitted=without)
+    first = given[0]
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
     final = current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
@@ -395,7 +424,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            trials=tuple(fitted), steps=tuple(steps),
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
-                           rejected=tuple(rejected), dropped_terms=tuple(dropped))
+                           rejected=tuple(rejected), dropped_terms=tuple(dropped),
+                           analysis={"decimation": factor, "dt": dt, "record_dt": given[0].dt})
 
 
 def _drop_implausible(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],

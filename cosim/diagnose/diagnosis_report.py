@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,10 @@ class DiagnosisReport:
     dropped_terms : tuple of str
         Terms of the model before (``"row: term"``) dropped once an effect made them redundant (a spring standing
         in for friction).
+    analysis : dict
+        The step the search ran at: ``decimation`` (the factor the records were decimated by; 1: none), ``dt``
+        and ``record_dt`` in s. `rounds`, `trials`, `steps` and `rejected` are of that step; `effects`,
+        `model_after` and the figures of the records' own.
     """
 
     effects: tuple[EffectCandidate, ...]
@@ -79,6 +83,7 @@ class DiagnosisReport:
     data: Trajectory | None = None
     rejected: tuple[EffectCandidate, ...] = ()
     dropped_terms: tuple[str, ...] = ()
+    analysis: dict[str, Any] = field(default_factory=dict)
 
     @property
     def found(self) -> bool:
@@ -93,6 +98,7 @@ class DiagnosisReport:
                              "significant": c.significant, "parameters": dict(c.parameters)} for c in round_]
                            for round_ in self.trials],
                 "rejected": [e.to_dict() for e in self.rejected], "dropped_terms": list(self.dropped_terms),
+                "analysis": dict(self.analysis),
                 "equations_after": self.model_after.equations()}
 
     def plot_evidence(self, path: str | os.PathLike) -> Path:
