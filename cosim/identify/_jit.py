@@ -3,8 +3,9 @@
 CasADi's own JIT (``{"jit": True}``) compiles in every process again: 0.2 s a model structure, about 1.8 s of
 a 12 s diagnosis. Here the function's generated C is hashed and its shared library kept under
 ``<cache>/jit/`` (the cache of the bundled FMUs: ``$COSIM_CACHE_DIR``, else ``~/.cache/cosim``), written
-atomically, so that another process or a later run loads it instead of compiling. Written by hand because
-CasADi has no persistent cache of compiled functions.
+atomically, so that another process or a later run loads it instead of compiling; at most
+:data:`MAX_LIBRARIES` are kept, the least recently used removed first. Written by hand because CasADi has no
+persistent cache of compiled functions.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ from pathlib import Path
 
 #: Seconds a compilation may take.
 COMPILE_TIMEOUT_S = 120
+#: Most shared libraries kept (about 160 kB each): after a new one is compiled, the least recently used beyond
+#: this many are removed (a library is marked used each time it is loaded).
+MAX_LIBRARIES = 256
 
 
 def compiled(function, name: str):
@@ -52,6 +56,23 @@ def compiled(function, name: str):
                     os.replace(partial, library)  # atomic: a concurrent process sees all of it or nothing
                 finally:
                     Path(partial).unlink(missing_ok=True)
+                prune(folder, MAX_LIBRARIES)
+            else:
+                os.utime(library)  # used now: the last to be pruned
         return ca.external(name, str(library))
     except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build: the interpreter runs it
         return None
+
+
+def prune(folder: Path, keep: int) -> list[Path]:
+    """Remove all but the `keep` most recently used shared libraries of `folder` (by modification time, which a
+    load refreshes); returns the removed ones. A library another process has loaded stays mapped there."""
+    libraries = sorted(folder.glob("*.so"), key=lambda p: p.stat().st_mtime, reverse=True)
+    removed = []
+    for path in libraries[keep:]:
+        try:
+            path.unlink()
+            removed.append(path)
+        except OSError:  # removed by a concurrent prune, or not ours to remove
+            pass
+    return removed
