@@ -121,6 +121,29 @@ def test_cli_decimate_option(tmp_path):
         assert result.exit_code == 0, result.output
         assert json.loads(result.stdout)["analysis"]["decimation"] == factor
     assert "searched at 333.3 Hz (the records decimated by 3)" in runner.invoke(main, common).stdout
-    result = runner.invoke(main, [*common, "--decimate", "fast"])
-    assert result.exit_code != 0 and "--decimate must be auto or a positive integer, got 'fast'" in result.output
-    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+    for command in (common, ["identify", str(path), "--state", "x,v", "--input", "u"]):
+        result = runner.invoke(main, [*command, "--decimate", "fast"])
+        assert result.exit_code != 0 and "--decimate must be auto or a positive integer, got 'fast'" in result.output
+        assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+    identified = runner.invoke(main, ["identify", str(path), "--state", "x,v", "--input", "u", "--decimate", "2",
+                                      "-o", str(tmp_path / "identified.json")])
+    assert identified.exit_code == 0, identified.output
+    meta = IdentifiedModel.load(tmp_path / "identified.json").meta
+    assert meta["refinement"]["decimation"] == 2
+
+
+@pytest.mark.slow
+def test_identification_refines_decimated_then_at_the_records_rate():
+    from cosim import SINDYc
+
+    data = _plant(noise=0.02)
+    est = SINDYc(refine="output_error").fit(data, states=["x", "v"], inputs=["u"])
+    refinement = est.model_.meta["refinement"]
+    assert refinement["decimation"] == 3 and refinement["analysis_dt"] == pytest.approx(3 * DT)
+    coef = dict(zip(est.terms_, est.coef_[1], strict=True))
+    assert coef["v"] == pytest.approx(-B / M, rel=0.02) and coef["u"] == pytest.approx(1.0 / M, rel=0.02)
+    plain = SINDYc(refine="output_error", decimate=1).fit(data, states=["x", "v"], inputs=["u"])
+    assert "decimation" not in plain.model_.meta["refinement"]
+    assert refinement["cost"] <= 1.01 * plain.model_.meta["refinement"]["cost"]   # as good on the record itself
+    with pytest.raises(InvalidSettingError, match='decimate must be "auto" or a positive integer, got 0'):
+        SINDYc(decimate=0)

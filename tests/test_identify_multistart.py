@@ -188,7 +188,9 @@ def test_readme_tour_default_fit_is_stable_and_follows_the_data(noise):
     assert model.meta["stable"] is True
     ms = model.meta["multistart"]
     assert ms["chosen"] in [{"start": r["start"], "prior": r["prior"]} for r in ms["runs"]]
-    assert model.meta["refinement"]["cost"] <= min(r["cost"] for r in ms["runs"]) * 1.5
+    # (the runs' costs are of the decimated records the multi-start works on: compared with the winner's there)
+    refinement = model.meta["refinement"]
+    assert refinement.get("analysis_cost", refinement["cost"]) <= min(r["cost"] for r in ms["runs"]) * 1.5
     a = model.coef[:, [model.terms.index(s) for s in states]]
     b = model.coef[:, model.terms.index("Tm")]
     assert a[0].tolist() == [0.0, 1.0, 0.0, 0.0] and a[2].tolist() == [0.0, 0.0, 0.0, 1.0]  # kinematic rows

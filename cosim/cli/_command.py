@@ -103,3 +103,16 @@ def _ranges(items: tuple[str, ...], option: str) -> dict[str, tuple[float, float
             raise InvalidSettingError(f"{option} takes NAME=LOW:HIGH, got {name}={text}")
         out[name] = (parse_number(low, what=f"{option} {name} low"), parse_number(high, what=f"{option} {name} high"))
     return out
+
+
+def _decimate_option(text: str) -> int | str:
+    """``--decimate``: "auto" or a positive integer (a one-line error otherwise)."""
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        factor = int(text)
+    except ValueError:
+        factor = 0
+    if factor < 1:
+        raise InvalidSettingError(f"--decimate must be auto or a positive integer, got {text!r}")
+    return factor

@@ -8,7 +8,7 @@ import click
 
 from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _names, _pairs
+from ._command import _decimate_option, _emit, _friendly, _names, _pairs
 
 __all__ = ["DIAGNOSE_MIN_SAMPLES", "diagnose_command"]
 
@@ -47,9 +47,9 @@ DIAGNOSE_MIN_SAMPLES = 200
               help="A state's noise level, e.g. its sensor's resolution 'qm=5e-6', instead of the estimate from "
                    "the data.")
 @click.option("--decimate", default="auto", show_default=True, metavar="auto|N",
-              help="Search at the record's step times N (measured signals low-pass filtered, inputs averaged), then "
-                   "refit at the record's own step; auto: down to ten times the record's band on records of more "
-                   "than 4000 samples; 1: never.")
+              help="Identify and search at the record's step times N (measured signals low-pass filtered, inputs "
+                   "averaged), then refit at the record's own step; auto: down to ten times the record's band on "
+                   "records of more than 4000 samples; 1: never.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), default=None,
@@ -106,8 +106,8 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     else:
         if isinstance(known, dict):
             known = {**{p: f"{p}_dot" for p in derived if p in state_names and f"{p}_dot" in state_names}, **known}
-        estimator = SINDYc(**{**BASE_SETTINGS, "kinematics": known}).fit(records, states=state_names,
-                                                                         inputs=input_names)
+        estimator = SINDYc(**{**BASE_SETTINGS, "kinematics": known, "decimate": factor}).fit(
+            records, states=state_names, inputs=input_names)
         model, found_rows = estimator.model_, format_kinematics(estimator.kinematics_)
     levels = {name: parse_number(text, what=f"--noise {name}")
               for name, text in _pairs(tuple(noise.split(",")), "--noise").items()} if noise else None
@@ -140,19 +140,6 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                  f"after: NRMSE {report.after['nrmse_pct']:.4g} %, R2 {report.after['r2']:.6g}")
     lines += [f"{k}: {payload[k]}" for k in ("report", "model") if k in payload]
     _emit(as_json, payload, "\n".join(lines))
-
-
-def _decimate_option(text: str) -> int | str:
-    """``--decimate``: "auto" or a positive integer (a one-line error otherwise)."""
-    if text.strip() == "auto":
-        return "auto"
-    try:
-        factor = int(text)
-    except ValueError:
-        factor = 0
-    if factor < 1:
-        raise InvalidSettingError(f"--decimate must be auto or a positive integer, got {text!r}")
-    return factor
 
 
 def _kinematics_option(text: str, states: list[str]) -> str | dict[str, str]:

@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _names, _pairs
+from ._command import _decimate_option, _emit, _friendly, _names, _pairs
 
 __all__ = ["identify_command", "parse_kinematics_option", "format_kinematics"]
 
@@ -69,12 +69,17 @@ def format_kinematics(pairs: tuple) -> str:
               help="Savitzky-Golay window of derived velocities in samples (odd); default chosen from the data.")
 @click.option("--allow-unstable", is_flag=True,
               help="Keep an unstable identified model (with a warning) instead of failing with exit status 1.")
+@click.option("--decimate", default="auto", show_default=True, metavar="auto|N",
+              help="Refine on the record's step times N (states low-pass filtered, inputs averaged), then once more "
+                   "at its own step; auto: down to ten times the record's band on records of more than 4000 "
+                   "samples; 1: never.")
 @click.option("--time", "time_column", default="time", show_default=True, help="Name of the time column [s].")
 @click.option("--json", "as_json", is_flag=True, help="Print the model, equations and fit as JSON.")
 @_friendly
 def identify_command(data: str, states: str, inputs: str, out: str | None, library: str, degree: int, terms: str,
                      threshold: str, differentiation: str, refine: bool, kinematics: str, derive: str | None,
-                     derive_window: int | None, allow_unstable: bool, time_column: str, as_json: bool) -> None:
+                     derive_window: int | None, allow_unstable: bool, decimate: str, time_column: str,
+                     as_json: bool) -> None:
     """Identify a SINDYc model from a data file (CSV or Parquet) and print its equations and fit.
 
     The fit is the free-run simulation of the model from the first sample, with the measured inputs held
@@ -99,7 +104,8 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
                        threshold=threshold if threshold == "auto" else parse_number(threshold, what="--threshold"),
                        differentiation=differentiation, kinematics=parse_kinematics_option(kinematics),
                        velocities=derived or None, derive_window=derive_window,
-                       refine="output_error" if refine else None, allow_unstable=allow_unstable)
+                       refine="output_error" if refine else None, allow_unstable=allow_unstable,
+                       decimate=_decimate_option(decimate))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", IdentificationWarning)
         estimator.fit(traj, states=state_names, inputs=input_names)

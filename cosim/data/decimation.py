@@ -19,6 +19,7 @@ scipy.signal is imported when a record is decimated.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from functools import lru_cache
 
@@ -28,7 +29,13 @@ from ..errors import DataError, InvalidSettingError
 from ._spectrum import signal_spectrum
 from .trajectory import Trajectory
 
-__all__ = ["decimate", "noise_gain", "signal_bandwidth"]
+__all__ = ["RATE_PER_BAND", "WORK_SAMPLES", "decimate", "decimate_arrays", "decimation_factor", "noise_gain",
+           "signal_bandwidth"]
+
+#: The rate a fit works at over the band (the highest frequency the record shows, or the model's fastest mode).
+RATE_PER_BAND = 10.0
+#: Fewest samples (all records together) :func:`decimation_factor` brings records down to.
+WORK_SAMPLES = 4000
 
 
 def signal_bandwidth(x: Sequence[float] | np.ndarray, dt: float) -> float:
@@ -71,6 +78,56 @@ def signal_bandwidth(x: Sequence[float] | np.ndarray, dt: float) -> float:
         raise DataError(f"the sampling step must be positive, got {dt!r}")
     spectrum = signal_spectrum(x, float(dt))
     return float(spectrum.freq.max()) if spectrum.freq.size else 0.0
+
+
+def decimation_factor(records: Sequence[np.ndarray], dt: float, *, mode_hz: float = 0.0, min_samples: int = 200,
+                      work_samples: int = WORK_SAMPLES) -> int:
+    """The factor that brings records sampled every `dt` s down to :data:`RATE_PER_BAND` times their band.
+
+    The band is the highest :func:`signal_bandwidth` of any column of any record (measured signals, not inputs),
+    or `mode_hz` (a model's fastest mode) if higher. Records of at most `work_samples` samples together are kept
+    as they are (1), and none is brought below `work_samples` samples together or `min_samples` on its own:
+    fewer samples leave a fit's checks and grids coarse, for little time saved.
+
+    Parameters
+    ----------
+    records : sequence of ndarray, shape (n_k, signals)
+        The measured signals of each record.
+    dt : float
+        Their common step in s.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(20000) * 1e-3
+    >>> x = np.sin(2 * np.pi * 2.0 * t) + 1e-3 * np.random.default_rng(0).standard_normal(t.size)
+    >>> decimation_factor([x[:, None]], 1e-3)    # a 2 Hz band: 20 Hz would do, 4000 samples are kept
+    5
+    """
+    lengths = [len(r) for r in records]
+    total = sum(lengths)
+    if total <= work_samples:
+        return 1
+    band = max([mode_hz] + [signal_bandwidth(np.asarray(r, dtype=float)[:, j], dt) for r in records
+                            for j in range(np.shape(r)[1])])
+    by_band = math.inf if band <= 0.0 else math.floor(1.0 / (dt * RATE_PER_BAND * band))
+    return int(max(1, min(by_band, total // work_samples, min(lengths) // min_samples)))
+
+
+def decimate_arrays(measured: np.ndarray, held: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`decimate` on arrays: `measured` (n, k) low-pass filtered and sampled, `held` (n, m) averaged over
+    each new step; both ``ceil(n / factor)`` rows."""
+    from scipy.signal import resample_poly
+
+    measured, held = np.asarray(measured, dtype=float), np.asarray(held, dtype=float)
+    if factor == 1:
+        return measured, held
+    n = len(measured)
+    starts = np.arange(0, n, factor)
+    counts = np.diff(np.append(starts, n))
+    slow = resample_poly(measured, 1, factor, axis=0, window=_low_pass(factor), padtype="line")[:starts.size]
+    mean = np.add.reduceat(held, starts, axis=0) / counts.reshape(-1, *([1] * (held.ndim - 1)))
+    return slow, mean
 
 
 @lru_cache(maxsize=32)
@@ -129,8 +186,6 @@ def decimate(traj: Trajectory, factor: int, *, held: Sequence[str] | None = None
     >>> bool(error[5:-5].max() < 1e-3 and error.max() < 5e-3)
     True
     """
-    from scipy.signal import resample_poly
-
     if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
         raise InvalidSettingError(f"the decimation factor must be a positive integer, got {factor!r}")
     factor = int(factor)
@@ -146,15 +201,11 @@ def decimate(traj: Trajectory, factor: int, *, held: Sequence[str] | None = None
     n = len(traj)
     if n < 2 * factor:
         raise DataError(f"a record of {n} samples is too short to decimate by {factor}; use a smaller factor")
+    measured = [name for name in traj.names if name not in held]
+    slow, mean = decimate_arrays(traj[measured].reshape(n, -1), traj[list(held)].reshape(n, -1), factor)
+    columns = {**dict(zip(measured, slow.T, strict=True)), **dict(zip(held, mean.T, strict=True))}
+    columns = {name: columns[name] for name in traj.names}
     starts = np.arange(0, n, factor)
-    counts = np.diff(np.append(starts, n))
-    columns = {}
-    for name in traj.names:
-        x = np.asarray(traj[name], dtype=float)
-        if name in held:
-            columns[name] = np.add.reduceat(x, starts) / counts
-        else:
-            columns[name] = resample_poly(x, 1, factor, window=_low_pass(factor), padtype="line")[:starts.size]
     meta = {**traj.meta, "decimated": {"factor": factor, "from_dt": traj.dt, "noise_gain": noise_gain(factor)}}
     return Trajectory.from_arrays(traj.time[starts], columns, units=dict(zip(traj.names, traj.units, strict=True)),
                                   roles=dict(zip(traj.names, traj.roles, strict=True)), meta=meta)

@@ -9,9 +9,11 @@ content needs. System identification's usual rate is about ten times the band (L
 * the band is the highest frequency at which any of the model's states stands above its noise in any record
   (:func:`~cosim.data.decimation.signal_bandwidth`: a friction's harmonics or a cogging's ripple widen it as far
   as they are seen), or the model's fastest mode (its linear part's largest eigenvalue modulus over 2 pi) if
-  higher: the search's rate stays at least :data:`RATE_PER_BAND` times that;
-* a record is never brought below :data:`WORK_SAMPLES` samples (all records together): below that the search
-  is fast already, and fewer samples leave the held-out check's halves and the nuisance grids coarse.
+  higher: the search's rate stays at least ten times that
+  (:data:`~cosim.data.decimation.RATE_PER_BAND`);
+* a record is never brought below 4000 samples (all records together,
+  :data:`~cosim.data.decimation.WORK_SAMPLES`): below that the search is fast already, and fewer samples leave
+  the held-out check's halves and the nuisance grids coarse.
 
 The search's result is then refitted at the record's own rate (:func:`~cosim.diagnose.diagnosis.diagnose`), so
 the parameters and the before/after figures are those of the data as given.
@@ -25,25 +27,22 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data.decimation import signal_bandwidth
+from ..data.decimation import decimation_factor
 from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
+from ..identify._stability import fastest_mode_hz
 from ..identify.model import IdentifiedModel
 from ._trials import _FitOptions
 from .candidates import EffectCandidate
 from .effects import EFFECTS, delayed_name
 from .screening import Nuisance, output_error_fit
 
-#: The search's rate over the band (the highest frequency the record shows, or the model's fastest mode).
-RATE_PER_BAND = 10.0
-#: Fewest samples (all records together) the search decimates a record to.
-WORK_SAMPLES = 4000
-
 
 def analysis_factor(model: IdentifiedModel, records: Sequence[Trajectory], decimate: int | str, *,
                     min_samples: int) -> int:
     """The decimation factor of the search: `decimate` itself when an integer, else chosen from the data
-    (never leaving a record fewer than `min_samples` samples).
+    (:func:`~cosim.data.decimation.decimation_factor` of the model's states, with the model's fastest mode;
+    never leaving a record fewer than `min_samples` samples).
 
     Raises
     ------
@@ -51,31 +50,19 @@ def analysis_factor(model: IdentifiedModel, records: Sequence[Trajectory], decim
         `decimate` neither ``"auto"`` nor a positive integer, or so large that a record keeps fewer than
         `min_samples` samples.
     """
-    total = sum(len(r) for r in records)
-    shortest = min(len(r) for r in records)
     if isinstance(decimate, str):
         if decimate != "auto":
             raise InvalidSettingError(f'decimate must be "auto" or a positive integer, got {decimate!r}')
-        if total <= WORK_SAMPLES:
-            return 1
-        dt = records[0].dt
-        band = max(signal_bandwidth(np.asarray(r[s], dtype=float), dt) for r in records for s in model.states)
-        band = max(band, _fastest_mode_hz(model))
-        by_band = math.inf if band == 0.0 else math.floor(1.0 / (dt * RATE_PER_BAND * band))
-        return int(max(1, min(by_band, total // WORK_SAMPLES, shortest // min_samples)))
+        return decimation_factor([r[list(model.states)].reshape(len(r), -1) for r in records], records[0].dt,
+                                 mode_hz=fastest_mode_hz(model), min_samples=min_samples)
     if isinstance(decimate, bool) or not isinstance(decimate, (int, np.integer)) or decimate < 1:
         raise InvalidSettingError(f'decimate must be "auto" or a positive integer, got {decimate!r}')
+    shortest = min(len(r) for r in records)
     if -(-shortest // int(decimate)) < min_samples:
         raise InvalidSettingError(f"decimating by {decimate} leaves {-(-shortest // int(decimate))} samples of a "
                                   f"{shortest}-sample record; a diagnosis needs {min_samples}: use a smaller "
                                   "factor")
     return int(decimate)
-
-
-def _fastest_mode_hz(model: IdentifiedModel) -> float:
-    """The modulus of the largest eigenvalue of the model's linear part, in Hz (0.0 for no states' terms)."""
-    a = model.linear_part().linear_matrices()[0]
-    return float(np.max(np.abs(np.linalg.eigvals(a)))) / (2.0 * math.pi) if a.size else 0.0
 
 
 def at_record_rate(model: IdentifiedModel, accepted: Sequence[EffectCandidate], nuisances: Sequence[Nuisance],

@@ -109,7 +109,7 @@ def _velocity_start(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.
 def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, np.ndarray]],
             dt: float, kin: Mapping[str, str], coef_scale: np.ndarray, meta: dict[str, Any],
             known_x0: list[np.ndarray] | None, *, refine_options: Mapping[str, Any], refine_initial_state: bool,
-            prune: bool, prefer_stable: bool = False) -> IdentifiedModel:
+            prune: bool, prefer_stable: bool = False, noise_gain: float = 1.0) -> IdentifiedModel:
     """The best of the output-error refinements of the `starts` (then pruned if `prune`); records them in `meta`.
 
     A multi-start: every start (name, equation-error model) is refined with the continuation prior of
@@ -136,7 +136,7 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
         order = [order[0], order[3], order[2], order[1]]
     order += last
     runs_oe = [(x, u[:-1]) for x, u in runs]
-    floor = _noise_floor(runs, meta)
+    floor = _noise_floor(runs, meta) * noise_gain  # (decimated runs keep that share of the noise)
     tried: list[dict[str, Any]] = []
     fits: list[_Run] = []
     seconds = 0.0
@@ -184,6 +184,54 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
                                   std_error=fit.std_error.tolist() if fit.std_error is not None else None)
     meta["x0"] = [v.tolist() for v in fit.x0]
     meta["seconds"]["refinement"] = seconds
+    return IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=fit.coef, dt=dt)
+
+
+def _analysis_runs(runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float, model: IdentifiedModel,
+                   decimate: int | str) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """The runs the multi-start works on and their decimation factor (`decimate`, or for ``"auto"`` the
+    :func:`~cosim.data.decimation.decimation_factor` of the states, with the equation-error model's fastest
+    mode): states low-pass filtered and sampled, inputs averaged over each new step."""
+    from ..data.decimation import decimate_arrays, decimation_factor
+    from ._stability import fastest_mode_hz
+
+    factor = decimation_factor([x for x, _ in runs], dt, mode_hz=fastest_mode_hz(model)) \
+        if decimate == "auto" else int(decimate)
+    if factor == 1:
+        return list(runs), 1
+    return [decimate_arrays(x, u, factor) for x, u in runs], factor
+
+
+def _refine_decimated(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, np.ndarray]],
+                      coarse: Sequence[tuple[np.ndarray, np.ndarray]], factor: int, dt: float,
+                      kin: Mapping[str, str], coef_scale: np.ndarray, meta: dict[str, Any],
+                      known_x0: list[np.ndarray] | None, *, refine_options: Mapping[str, Any],
+                      refine_initial_state: bool, prune: bool, prefer_stable: bool) -> IdentifiedModel:
+    """:func:`_refine` on the `coarse` runs (the `runs` decimated by `factor`, the `starts` made on them), then
+    the winner refined once more on the `runs` as given, from where it is (no prior, no continuation: it is
+    close). ``meta["refinement"]`` records the factor and both costs."""
+    from ..data.decimation import noise_gain
+    from .output_error import refine_output_error
+
+    if factor == 1:
+        return _refine(starts, runs, dt, kin, coef_scale, meta, known_x0, refine_options=refine_options,
+                       refine_initial_state=refine_initial_state, prune=prune, prefer_stable=prefer_stable)
+    model = _refine(starts, coarse, dt * factor, kin, coef_scale, meta, known_x0, refine_options=refine_options,
+                    refine_initial_state=refine_initial_state, prune=prune, prefer_stable=prefer_stable,
+                    noise_gain=noise_gain(factor))
+    support = model.coef != 0.0
+    for pos in kin:
+        support[model.states.index(pos)] = False
+    fit = refine_output_error(model, [(x, u[:-1]) for x, u in runs], dt=dt, support=support,
+                              estimate_x0=refine_initial_state and known_x0 is None,
+                              x0=known_x0 if known_x0 is not None else [np.asarray(v) for v in meta["x0"]],
+                              coef_scale=coef_scale, prior=0.0, continuation=False,
+                              max_nfev=int(refine_options.get("max_nfev", 60)))
+    meta["refinement"].update(decimation=factor, analysis_dt=dt * factor, analysis_cost=meta["refinement"]["cost"],
+                              cost=fit.cost, status=fit.status,
+                              std_error=fit.std_error.tolist() if fit.std_error is not None else None)
+    meta["x0"] = [v.tolist() for v in fit.x0]
+    meta["seconds"]["refinement"] += fit.seconds
     return IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=fit.coef, dt=dt)
 
 

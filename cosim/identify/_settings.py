@@ -113,6 +113,9 @@ def _check_settings(est: Any) -> None:
         if est.velocity_method != "auto":
             raise InvalidSettingError(f"derive_window sets the window of velocity_method 'auto'; with "
                                       f"{est.velocity_method!r} give velocity_options instead")
+    if est.decimate != "auto" and (isinstance(est.decimate, bool) or not isinstance(est.decimate, numbers.Integral)
+                                   or est.decimate < 1):
+        raise InvalidSettingError(f'decimate must be "auto" or a positive integer, got {est.decimate!r}')
     if not isinstance(est.allow_unstable, bool):
         raise InvalidSettingError(f"allow_unstable must be True or False, got {est.allow_unstable!r}")
     if est.refine not in _REFINE:

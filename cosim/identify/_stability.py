@@ -19,6 +19,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -76,3 +77,9 @@ def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarr
     out["stability"] = ("the free run on the longest record " + ("stays in range" if sim.ok else
                         f"diverges: {sim.message}"))
     return out
+
+
+def fastest_mode_hz(model: IdentifiedModel) -> float:
+    """The modulus of the largest eigenvalue of the model's linear part, in Hz (0.0 for no states' terms)."""
+    a = model.linear_part().linear_matrices()[0]
+    return float(np.max(np.abs(np.linalg.eigvals(a)))) / (2.0 * math.pi) if a.size else 0.0

@@ -133,7 +133,7 @@ from ._differentiation import _derive_velocity
 from ._equation_error import _equations, _window
 from ._library import _kinematic_rows, _library_terms
 from ._records import _known_initial_states, _measured, _prepare, _stacked
-from ._refinement import _refine, _starts
+from ._refinement import _analysis_runs, _refine_decimated, _starts
 from ._settings import DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
 from ._sparse_regression import _sparse_fit
 from ._stability import _stability, _unstable
@@ -212,6 +212,12 @@ class SINDYc:
     allow_unstable : bool
         Keep an unstable identified model with an :class:`IdentificationWarning` instead of raising
         :class:`~cosim.errors.UnstableModelError`.
+    decimate : "auto" or int
+        With refinement, the multi-start runs on the records decimated by this factor
+        (:func:`~cosim.data.decimation.decimate`), and its winner is refined once more on the records as given.
+        ``"auto"``: records of more than 4000 samples sampled faster than ten times their band (or the
+        equation-error model's fastest mode) are brought down to that rate, never below 4000 samples
+        (:func:`~cosim.data.decimation.decimation_factor`); 1: never. Recorded in ``meta["refinement"]``.
 
     Attributes
     ----------
@@ -249,7 +255,8 @@ class SINDYc:
                  velocities: Mapping[str, str] | None = None, velocity_method: str = "auto",
                  velocity_options: Mapping[str, Any] | None = None, derive_window: int | None = None,
                  refine: str | None = None, refine_initial_state: bool = True,
-                 refine_options: Mapping[str, Any] | None = None, allow_unstable: bool = False) -> None:
+                 refine_options: Mapping[str, Any] | None = None, allow_unstable: bool = False,
+                 decimate: int | str = "auto") -> None:
         self.library = library
         self.degree = degree
         self.terms = tuple(terms) if not isinstance(terms, str) else (terms,)
@@ -268,6 +275,7 @@ class SINDYc:
         self.refine_initial_state = refine_initial_state
         self.refine_options = dict(refine_options or {})
         self.allow_unstable = allow_unstable
+        self.decimate = decimate
         _check_settings(self)
 
     # -------------------------------------------------------------------------------------------- settings
@@ -290,7 +298,8 @@ class SINDYc:
                 "velocity_method": self.velocity_method, "velocity_options": dict(self.velocity_options),
                 "derive_window": self.derive_window,
                 "refine": self.refine, "refine_initial_state": self.refine_initial_state,
-                "refine_options": dict(self.refine_options), "allow_unstable": self.allow_unstable}
+                "refine_options": dict(self.refine_options), "allow_unstable": self.allow_unstable,
+                "decimate": self.decimate}
 
     # -------------------------------------------------------------------------------------------- fitting
     def fit(self, data: Trajectory | Sequence[Trajectory], *, states: Sequence[str] | None = None,
@@ -386,11 +395,13 @@ class SINDYc:
         if known_x0 is not None:
             meta["x0_known"] = [v.tolist() for v in known_x0]
         if self.refine == "output_error":
+            coarse, factor = _analysis_runs(runs, dt, model, self.decimate)
             starts = _starts(model, features, targets, free_rows, n_eff, noise_var, ee_threshold, self.ridge,
-                             sparse.coef_scale, runs=runs, dt=dt, kin=kin)
-            model = _refine(starts, runs, dt, kin, sparse.coef_scale, meta, known_x0,
-                            refine_options=self.refine_options, refine_initial_state=self.refine_initial_state,
-                            prune=self.threshold == "auto", prefer_stable=not self.allow_unstable)
+                             sparse.coef_scale, runs=coarse, dt=dt * factor, kin=kin)
+            model = _refine_decimated(starts, runs, coarse, factor, dt, kin, sparse.coef_scale, meta, known_x0,
+                                      refine_options=self.refine_options,
+                                      refine_initial_state=self.refine_initial_state, prune=self.threshold == "auto",
+                                      prefer_stable=not self.allow_unstable)
             if self.threshold == "auto":
                 threshold = meta["threshold"]["value"]
         meta["seconds"]["total"] = time.perf_counter() - started
@@ -585,4 +596,4 @@ _DEFAULTS = {"library": "linear", "degree": 2, "terms": [], "include_constant": 
              "ridge": 0.0, "differentiation": "integral", "differentiation_options": {}, "noise_compensation": True,
              "kinematics": "auto", "velocities": {}, "velocity_method": "auto", "velocity_options": {},
              "derive_window": None, "refine": None, "refine_initial_state": True, "refine_options": {},
-             "allow_unstable": False}
+             "allow_unstable": False, "decimate": "auto"}
