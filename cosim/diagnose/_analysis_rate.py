@@ -85,9 +85,11 @@ def at_record_rate(model: IdentifiedModel, accepted: Sequence[EffectCandidate], 
         taps = [terms.index(delayed_name(signal, d + i)) for i in (0, 1)]
         weight = coef[:, taps].sum(axis=1)
         row = int(np.argmax(np.abs(weight)))
-        centroid = (d * coef[row, taps[0]] + (d + 1) * coef[row, taps[1]]) / weight[row] * factor
-        whole = int(math.floor(max(centroid, 0.0)))
-        share = max(centroid, 0.0) - whole
+        centroid = (d * coef[row, taps[0]] + (d + 1) * coef[row, taps[1]]) / weight[row] * factor \
+            if weight[row] != 0.0 else float(d * factor)
+        centroid = max(centroid, 1.0)  # (tap 0 would be the input itself)
+        whole = int(math.floor(centroid))
+        share = centroid - whole
         coef[:, taps[0]], coef[:, taps[1]] = weight * (1.0 - share), weight * share
         renamed = {terms[k]: delayed_name(signal, whole + i) for i, k in enumerate(taps)}  # both at once
         terms = [renamed.get(name, name) for name in terms]
