@@ -147,3 +147,5 @@ def test_identification_refines_decimated_then_at_the_records_rate():
     assert refinement["cost"] <= 1.01 * plain.model_.meta["refinement"]["cost"]   # as good on the record itself
     with pytest.raises(InvalidSettingError, match='decimate must be "auto" or a positive integer, got 0'):
         SINDYc(decimate=0)
+    with pytest.raises(InvalidSettingError, match="decimate=100 leaves 151 samples of a 15001-sample record"):
+        SINDYc(refine="output_error", decimate=100).fit(data, states=["x", "v"], inputs=["u"])

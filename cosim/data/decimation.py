@@ -12,7 +12,7 @@ free-run (output-error) fit:
   line, not by zeros), then every ``factor``-th sample kept: in-band content is kept, white noise keeps
   :func:`noise_gain` of its variance (about ``1 / factor``);
 * a held (zero-order-hold) input is averaged over each new sample interval: what a model integrating the input
-  over that interval sees, to first order, where a filtered sample would shift an input step by half a filter.
+  over that interval sees, to first order, where a filtered sample would smear an input step over the filter.
 
 scipy.signal is imported when a record is decimated.
 """

@@ -19,9 +19,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import InvalidSettingError
 from ._stability import _stability
 from .model import IdentifiedModel
 
+#: Fewest samples of a record decimated for the refinement (``decimate=N``).
+_MIN_DECIMATED = 200
 #: The continuation prior of the first refinement of each start (the other has none).
 _PRIOR = 0.1
 #: The multi-start stops once a refinement's cost is below this multiple of the white-noise floor.
@@ -197,6 +200,10 @@ def _analysis_runs(runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float, mod
 
     factor = decimation_factor([x for x, _ in runs], dt, mode_hz=fastest_mode_hz(model)) \
         if decimate == "auto" else int(decimate)
+    shortest = min(len(x) for x, _ in runs)
+    if -(-shortest // factor) < _MIN_DECIMATED:
+        raise InvalidSettingError(f"decimate={factor} leaves {-(-shortest // factor)} samples of a {shortest}-sample "
+                                  f"record; the refinement needs {_MIN_DECIMATED}: use a smaller factor")
     if factor == 1:
         return list(runs), 1
     return [decimate_arrays(x, u, factor) for x, u in runs], factor
