@@ -85,7 +85,7 @@ def test_bad_decimation_settings_are_one_line_errors(call, error, fragment):
 
 
 @pytest.mark.slow
-def test_a_long_record_is_searched_decimated_and_its_friction_fitted_at_its_own_rate():
+def test_a_long_record_is_searched_decimated_and_its_friction_fitted_at_its_own_rate(tmp_path):
     data = _plant(fc=0.3)
     report = diagnose(LINEAR, data, effects="coulomb_friction,viscous_asymmetry,offset", max_effects=1)
     assert report.analysis["decimation"] == 3 and report.analysis["record_dt"] == pytest.approx(DT)
@@ -93,6 +93,7 @@ def test_a_long_record_is_searched_decimated_and_its_friction_fitted_at_its_own_
     assert report.effects[0].parameters["Fc"] == pytest.approx(0.3, rel=0.1)
     assert report.data is not None and len(report.data) == len(data)   # the figures are the record's own
     assert report.after["nrmse_pct"] < 0.6 * report.before["nrmse_pct"]
+    assert "decimated by 3 (333.3 Hz)" in report.write_report(tmp_path / "diagnosis.html").read_text()
 
 
 @pytest.mark.slow

@@ -136,6 +136,14 @@ class DiagnosisReport:
         self.add_to_report(report, path.with_suffix(""))
         return report.write(path)
 
+    def _rate_note(self) -> str:
+        """A caption's note of the step the search ran at, when it is not the record's ("" otherwise)."""
+        factor = self.analysis.get("decimation", 1)
+        if factor == 1:
+            return ""
+        return (f"; the search ran on the record decimated by {factor} ({1.0 / self.analysis['dt']:.4g} Hz), the "
+                f"effects were then refitted at its own {1.0 / self.analysis['record_dt']:.4g} Hz")
+
     def add_to_report(self, report: Report, stem: str | os.PathLike) -> list[Path]:
         """Add the diagnosis sections to `report`: the effects with their parameters (± standard error), the
         error before and after, the first round's candidates, the evidence, the residuals before and after,
@@ -166,7 +174,7 @@ class DiagnosisReport:
         report.add_table("Error before and after", [
             {"": "before", **{k: self.before[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}},
             {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
-            caption="free-run simulation against the data; means over the states")
+            caption="free-run simulation against the data; means over the states" + self._rate_note())
         if self.rejected:
             report.add_table("Rejected: better in-sample, not on held-out data (or refitted out of range)", [
                 {"effect": c.name, "attached to": c.attached_to,
