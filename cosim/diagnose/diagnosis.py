@@ -294,7 +294,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     factor = analysis_factor(model, given, decimate, min_samples=MIN_SAMPLES)
     records = [decimate_record(r, factor, held=model.inputs) for r in given]  # (as given for factor 1)
     columns, starts = _columns(model, records)
-    given_columns, given_starts = _columns(model, given)
+    given_columns, given_starts = (dict(columns), starts) if factor == 1 else _columns(model, given)
     names = effect_names(check_effect_selection(effects, model, given_columns, given[0].dt, noise))
     for name in model.inputs:
         if np.ptp(given_columns[name]) == 0.0:

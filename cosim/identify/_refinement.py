@@ -150,9 +150,7 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
         model = model() if callable(model) else model
         if model is None:
             continue
-        support = model.coef != 0.0
-        for pos in kin:
-            support[model.states.index(pos)] = False
+        support = _support(model, kin)
         options = {"prior": prior, "continuation": True, "max_nfev": 60, **refine_options}
         options["prior"] = prior
         fit = refine_output_error(model, runs_oe, dt=dt, support=support,
@@ -188,6 +186,14 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
     meta["x0"] = [v.tolist() for v in fit.x0]
     meta["seconds"]["refinement"] = seconds
     return IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=fit.coef, dt=dt)
+
+
+def _support(model: IdentifiedModel, kin: Mapping[str, str]) -> np.ndarray:
+    """The coefficients a refinement moves: the non-zero ones, none in a pinned kinematic row."""
+    support = model.coef != 0.0
+    for pos in kin:
+        support[model.states.index(pos)] = False
+    return support
 
 
 def _analysis_runs(runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float, model: IdentifiedModel,
@@ -226,9 +232,7 @@ def _refine_decimated(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np
     model = _refine(starts, coarse, dt * factor, kin, coef_scale, meta, known_x0, refine_options=refine_options,
                     refine_initial_state=refine_initial_state, prune=prune, prefer_stable=prefer_stable,
                     noise_gain=noise_gain(factor))
-    support = model.coef != 0.0
-    for pos in kin:
-        support[model.states.index(pos)] = False
+    support = _support(model, kin)
     fit = refine_output_error(model, [(x, u[:-1]) for x, u in runs], dt=dt, support=support,
                               estimate_x0=refine_initial_state and known_x0 is None,
                               x0=known_x0 if known_x0 is not None else [np.asarray(v) for v in meta["x0"]],
