@@ -96,6 +96,14 @@ def test_a_long_record_is_searched_decimated_and_its_friction_fitted_at_its_own_
     assert "decimated by 3 (333.3 Hz)" in report.write_report(tmp_path / "diagnosis.html").read_text()
 
 
+def test_a_fixed_value_the_decimated_record_cannot_show_keeps_the_records_rate():
+    """1500 periods per radian: inside the 1 kHz record's band, beyond the band of a third of its rate."""
+    data = _plant(fc=0.3)
+    report = diagnose(LINEAR, data, effects="cogging:periods=1500", max_effects=1)
+    assert report.analysis["decimation"] == 1
+    assert diagnose(LINEAR, data, effects="cogging:periods=40", max_effects=1).analysis["decimation"] == 3
+
+
 @pytest.mark.slow
 def test_a_delay_found_decimated_is_placed_again_at_the_records_rate():
     """7 samples late at 1 kHz: 2.33 samples of the search's 3 ms step, placed again as taps 7 and 8."""

@@ -291,11 +291,13 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
               x0: str | Sequence[float], noise: Mapping[str, float] | None, held_out: bool,
               decimate: int | str, progress: bool | None) -> DiagnosisReport:
     given = _records(model, data)
+    given_columns, given_starts = _columns(model, given)
+    names = effect_names(check_effect_selection(effects, model, given_columns, given[0].dt, noise))
     factor = analysis_factor(model, given, decimate, min_samples=MIN_SAMPLES)
     records = [decimate_record(r, factor, held=model.inputs) for r in given]  # (as given for factor 1)
-    columns, starts = _columns(model, records)
-    given_columns, given_starts = (dict(columns), starts) if factor == 1 else _columns(model, given)
-    names = effect_names(check_effect_selection(effects, model, given_columns, given[0].dt, noise))
+    columns, starts = (dict(given_columns), given_starts) if factor == 1 else _columns(model, records)
+    if factor > 1 and decimate == "auto" and not _shown_decimated(effects, model, columns, records[0].dt, noise):
+        factor, records, columns, starts = 1, given, dict(given_columns), given_starts
     for name in model.inputs:
         if np.ptp(given_columns[name]) == 0.0:
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
@@ -426,6 +428,17 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
                            rejected=tuple(rejected), dropped_terms=tuple(dropped),
                            analysis={"decimation": factor, "dt": dt, "record_dt": given[0].dt})
+
+
+def _shown_decimated(effects: str | Sequence[str], model: IdentifiedModel, columns: Mapping[str, np.ndarray],
+                     dt: float, noise: Mapping[str, float] | None) -> bool:
+    """Whether the values fixed in `effects` (``cogging:periods=N``) are still inside the band of the decimated
+    `columns`: a value the user fixed keeps the record's own rate rather than be searched where it cannot show."""
+    try:
+        check_effect_selection(effects, model, columns, dt, noise)
+    except InvalidSettingError:
+        return False
+    return True
 
 
 def _drop_implausible(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
