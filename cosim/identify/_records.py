@@ -9,6 +9,7 @@ that are constant, hence not persistently exciting: the fit warns about them and
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -16,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..data.trajectory import Trajectory
-from ..errors import DataError, InvalidSettingError, UnknownVariableError
+from ..errors import DataError, IdentificationWarning, InvalidSettingError, UnknownVariableError
 
 #: ``derive(position, t, name)``: the velocity state `name` from samples of its position at times `t`.
 _Derive = Callable[[np.ndarray, np.ndarray, str], np.ndarray]
@@ -149,3 +150,11 @@ def _known_initial_states(x0: Any, state_names: Sequence[str], n_runs: int) -> l
                             f"got {vec.tolist()}")
         out.append(vec)
     return out
+
+
+def _warn_constant_inputs(constant: Mapping[str, float]) -> None:
+    """Warn about each input that is constant in the data (left out of the model)."""
+    for name, value in constant.items():
+        warnings.warn(f"input {name!r} is constant ({value:g}) in the data: it is not persistently "
+                      "exciting, so its effect cannot be identified; it is left out of the model "
+                      "(excite it, or pass inputs=[...] without it)", IdentificationWarning, stacklevel=4)

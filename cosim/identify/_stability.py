@@ -47,8 +47,8 @@ def _unstable(model: IdentifiedModel, *, allow: bool, refined: bool) -> None:
     remedies = _REMEDIES.replace("refine by output error (refine='output_error', --refine), ", "") if refined \
         else _REMEDIES
     message = f"the identified model is unstable ({what})"
-    if allow:
-        warnings.warn(f"{message}; its free-run simulation diverges", IdentificationWarning, stacklevel=3)
+    if allow:  # stacklevel: past SINDYc.fit and its BLAS wrapper, to the caller's line
+        warnings.warn(f"{message}; its free-run simulation diverges", IdentificationWarning, stacklevel=4)
         return
     raise UnstableModelError(f"{message}: {remedies}", model=model, eigenvalues=eig)
 

@@ -121,18 +121,18 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..data.trajectory import Trajectory
 from ..errors import DataError, IdentificationWarning, InvalidSettingError
 from ._differentiation import _derive_velocity
 from ._equation_error import _equations, _window
 from ._library import _kinematic_rows, _library_terms
-from ._records import _known_initial_states, _measured, _prepare, _stacked
+from ._records import _known_initial_states, _measured, _prepare, _stacked, _warn_constant_inputs
 from ._refinement import _analysis_runs, _refine_decimated, _starts
 from ._settings import DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
 from ._sparse_regression import _sparse_fit
@@ -302,6 +302,9 @@ class SINDYc:
                 "decimate": self.decimate}
 
     # -------------------------------------------------------------------------------------------- fitting
+    # one BLAS thread: the same data give the same model on every run (two OpenBLAS threads split sums in an
+    # order that varies run to run), and the tall, thin least squares run no slower on 2 cores
+    @threadpool_limits.wrap(limits=1, user_api="blas")
     def fit(self, data: Trajectory | Sequence[Trajectory], *, states: Sequence[str] | None = None,
             inputs: Sequence[str] | None = None, x0: Any = None) -> SINDYc:
         """Identify the model from one record or several records with the same step.
@@ -341,10 +344,7 @@ class SINDYc:
         _check_settings(self)
         self._windows: dict[str, list[int]] = {}
         records = _prepare(data, states, inputs, _check_mapping("velocities", self.velocities), self._velocity)
-        for name, value in records.constant_inputs.items():
-            warnings.warn(f"input {name!r} is constant ({value:g}) in the data: it is not persistently "
-                          "exciting, so its effect cannot be identified; it is left out of the model "
-                          "(excite it, or pass inputs=[...] without it)", IdentificationWarning, stacklevel=2)
+        _warn_constant_inputs(records.constant_inputs)
         runs, state_names, input_names, dt = records.runs, records.states, records.inputs, records.dt
         pairs = _find_kinematics(self.kinematics, self.velocities, state_names, runs, dt)
         kin = _kinematic_rows({p.position: p.velocity for p in pairs if p.found != "derived"}, self.velocities,
