@@ -346,7 +346,9 @@ _CASADI_CHUNK = 1024
 #: Records of at least this many steps are run by the chunk compiled to machine code (:mod:`._jit`, through the
 #: system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits; 0.2 s to compile a
 #: model structure the first time on a machine, then loaded from the cache); shorter ones by the interpreter.
-_JIT_MIN_STEPS = 8 * _CASADI_CHUNK
+#: One chunk: a decimated long record (4000 samples or more) is run compiled too; at 8 chunks its runs took
+#: half of the timing record's diagnosis (benchmarks/bench_diagnosis.py, 16.3 -> 10.4 s).
+_JIT_MIN_STEPS = _CASADI_CHUNK
 
 
 def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequence[Term], coef: np.ndarray):
