@@ -28,6 +28,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -121,9 +122,7 @@ class IdentifiedModel:
             raise InvalidSettingError("a model needs at least one state")
         if len(set(states + inputs)) != len(states + inputs):
             raise InvalidSettingError(f"state and input names must be unique, got {states + inputs}")
-        parsed = tuple(Term(t) for t in self.terms)
-        for term in parsed:
-            term.check_names(states + inputs)
+        parsed = _checked_terms(tuple(self.terms), states + inputs)
         coef = np.array(self.coef, dtype=float, copy=True)
         if coef.shape != (len(states), len(parsed)):
             raise InvalidSettingError(f"coef has shape {coef.shape}, expected (n_states, n_terms) = "
@@ -138,7 +137,6 @@ class IdentifiedModel:
         object.__setattr__(self, "units", dict(self.units))
         object.__setattr__(self, "meta", json.loads(json.dumps(dict(self.meta), default=_jsonable)))
         object.__setattr__(self, "_parsed", parsed)
-        object.__setattr__(self, "_rhs", compile_rhs(states, inputs, parsed, coef))
 
     # ------------------------------------------------------------------ structure
     @property
@@ -195,7 +193,11 @@ class IdentifiedModel:
 
     def rhs(self, x: Sequence[float], u: Sequence[float]) -> np.ndarray:
         """``dx/dt`` at one state and input."""
-        return np.array(self._rhs(list(map(float, x)), list(map(float, u))))
+        rhs = self.__dict__.get("_rhs")
+        if rhs is None:  # made on the first call, then kept (a diagnosis makes a thousand models, most never asked)
+            rhs = compile_rhs(self.states, self.inputs, self._parsed, self.coef)
+            object.__setattr__(self, "_rhs", rhs)
+        return np.array(rhs(list(map(float, x)), list(map(float, u))))
 
     def features(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The library evaluated on data: ``theta``, shape (n_samples, n_terms)."""
@@ -372,6 +374,16 @@ class IdentifiedModel:
         if not path.is_file():
             raise FmuNotFoundError(f"model file not found: {path}; create one with `cosim identify ... -o {path}`")
         return cls.from_json(path.read_text(encoding="utf-8"))
+
+
+@lru_cache(maxsize=1024)
+def _checked_terms(terms: tuple[str, ...], names: tuple[str, ...]) -> tuple[Term, ...]:
+    """The terms parsed and checked against `names` (cached: a diagnosis builds a thousand models from the same
+    few libraries; a Term is immutable, so one parse serves them all)."""
+    parsed = tuple(Term(t) for t in terms)
+    for term in parsed:
+        term.check_names(names)
+    return parsed
 
 
 def _linear_step(ad: np.ndarray):
