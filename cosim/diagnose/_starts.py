@@ -12,6 +12,9 @@ drifts. For an effect with :attr:`~cosim.diagnose.effects.Effect.multistart`:
   true 19 at -15 800 to -17 100, and their trial fits give -315 and -19 976) is started from the best-scoring
   values, :data:`PEAKS` more at every place it attaches, each a peak of the score (not next to a better value).
 
+An effect on an input whose base took it up elsewhere (a delay) is also started from the base identified again
+with the effect's input copies (:mod:`._joint_start`).
+
 The lowest output error is kept. A fit that ends at a value the record does not show
 (:attr:`~cosim.diagnose.effects.Effect.shown`: a Stribeck velocity the speeds never reach twice of, a Coulomb
 friction fading at the top speed) is not kept; when none is left, the candidate is not significant.
@@ -27,6 +30,7 @@ import numpy as np
 
 from ..identify.model import IdentifiedModel
 from . import _record_band as rb
+from ._joint_start import has_joint_start, joint_start
 from ._ranking import _scores, record_band
 from ._record_band import RecordBand
 from ._trials import _cost_of, _fit_with, _FitOptions, _Trial
@@ -56,8 +60,10 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     searched = effect.multistart and cand.nuisance is not None \
         and not any(n.startswith(cand.name + ":") for n in names)
     if not searched:
-        return _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
-                         iterations=iterations)
+        trial = _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                          iterations=iterations)
+        return _joint(trial, current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                      iterations) if has_joint_start(cand.name) else trial
     band = band if band is not None else record_band(screen)
     if effect.integer:
         starts = [cand, *_score_peaks(screen, effect, cand, band, alpha, bic_margin, min_size)]
@@ -81,6 +87,22 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                                   explained={**first.candidate.explained, "outside_band": 1.0})
         return first
     return best
+
+
+def _joint(trial: _Trial | None, current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray],
+           dt: float, nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
+           min_size: float, fit: _FitOptions, iterations: int) -> _Trial | None:
+    """The better of `trial` and the trial started from the base re-identified with the effect's input copies
+    (:mod:`._joint_start`); the winner remembers its start for the fit to convergence."""
+    start = joint_start(current, cand, columns, dt, fit.segments)
+    if start is None:
+        return trial
+    other = _fit_with(start[0], start[1], columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                      iterations=iterations)
+    if other is None or (trial is not None and _cost_of(trial.model) <= _cost_of(other.model)):
+        return trial
+    other.start = start[0]
+    return other
 
 
 def _score_peaks(screen: OutputErrorScreen, effect: Effect, cand: EffectCandidate, band, alpha: float,

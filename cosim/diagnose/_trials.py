@@ -173,6 +173,7 @@ class _Trial:
     nuisances: list[Nuisance]
     nuisance: Nuisance | None
     new_columns: dict[str, np.ndarray]
+    start: IdentifiedModel | None = None  # the base it was fitted from, when not the current model
 
 
 def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,

@@ -349,8 +349,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                                        key=lambda t: t.candidate.delta_bic), screen.n_obs)
         best = None
         for trial in trials[:HELD_OUT_TRIES]:
-            trial = _fit_with(current, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin,
-                              min_size, fit) or trial  # fitted to convergence
+            trial = _fit_with(trial.start or current, trial.candidate, columns, dt, nuisances, screen, alpha,
+                              bic_margin, min_size, fit) or trial  # fitted to convergence, from its own start
             if not _held_out(check, current, trial, columns):
                 rejected.append(_final_parameters(trial.candidate, trial.model))
                 continue
