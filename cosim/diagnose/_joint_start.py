@@ -75,4 +75,6 @@ def joint_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mappin
     rows = roles.dynamic_rows
     weights = tuple(float(fitted.coef[fitted.states.index(r), fitted.terms.index(t)]) if t in fitted.terms else 0.0
                     for r in rows for t in terms)
-    return replace(current, coef=coef), replace(cand, terms=terms, rows=rows, coefficients=weights)
+    # from the fit's own initial states too (the base's, with these coefficients, start the free run elsewhere)
+    start = replace(current, coef=coef, meta={**current.meta, "x0": fitted.meta["x0"]})
+    return start, replace(cand, terms=terms, rows=rows, coefficients=weights)

@@ -202,7 +202,8 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         trial = _tied_start(current, cand, tie, screen)
     else:
         trial = _with_effect(current, cand, list(new_cols))
-    if free_run_cost(trial, cols, dt, screen.x0, screen.sigma, segments=fit.segments,
+    own_x0 = screen.x0 if current is screen.model else _fitted_x0(current, fit.segments)  # (another start's own)
+    if free_run_cost(trial, cols, dt, own_x0, screen.sigma, segments=fit.segments,
                      measured=fit.measured) > float(screen.residual @ screen.residual):
         if tie is None:  # the score's one linear step overshoots (a drifting free run): start the effect from zero
             trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
