@@ -122,3 +122,10 @@ def test_a_delay_the_base_took_up_elsewhere_is_named(tmp_path):
     assert [(e["name"], e["attached_to"]) for e in payload["effects"]][:1] == [("delay", "Tm")], payload["message"]
     assert payload["effects"][0]["parameters"]["delay_s"] == pytest.approx(truth["params"]["delay_s"], rel=0.05)
     assert payload["after"]["nrmse_pct"] * 3 < payload["before"]["nrmse_pct"]
+
+
+def test_only_an_untied_input_effect_gets_a_re_identified_start():
+    from cosim.diagnose._joint_start import has_joint_start
+    from cosim.diagnose.effects import EFFECTS
+
+    assert [name for name in sorted(EFFECTS) if has_joint_start(name)] == ["delay"]  # not saturation, dead zone
