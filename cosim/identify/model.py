@@ -193,11 +193,16 @@ class IdentifiedModel:
 
     def rhs(self, x: Sequence[float], u: Sequence[float]) -> np.ndarray:
         """``dx/dt`` at one state and input."""
+        return np.array(self._point_rhs()(list(map(float, x)), list(map(float, u))))
+
+    def _point_rhs(self):
+        """``f(x, u) -> dx/dt`` on lists of floats (generated Python), made on first use and kept: a diagnosis
+        builds a thousand models and asks almost none for it."""
         rhs = self.__dict__.get("_rhs")
-        if rhs is None:  # made on the first call, then kept (a diagnosis makes a thousand models, most never asked)
+        if rhs is None:
             rhs = compile_rhs(self.states, self.inputs, self._parsed, self.coef)
             object.__setattr__(self, "_rhs", rhs)
-        return np.array(rhs(list(map(float, x)), list(map(float, u))))
+        return rhs
 
     def features(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The library evaluated on data: ``theta``, shape (n_samples, n_terms)."""

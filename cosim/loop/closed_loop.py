@@ -87,7 +87,7 @@ class ModelPlant:
         self._rhs: Callable[[list[float], list[float]], Any] | None = None
         if isinstance(model, IdentifiedModel) and not model.is_linear:
             self.states, model_inputs, model_outputs = model.states, model.inputs, model.states
-            self._rhs, self._nsub = model._rhs, int(nsub)
+            self._rhs, self._nsub = model._point_rhs(), int(nsub)
             c = np.eye(len(self.states))
         else:
             if isinstance(model, IdentifiedModel):
