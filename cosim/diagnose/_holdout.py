@@ -189,32 +189,34 @@ class HeldOutCheck:
                 out.append(r)
         return out
 
-    def judge(self, base: IdentifiedModel, fuller: IdentifiedModel,
-              columns: Mapping[str, np.ndarray]) -> HeldOutEvidence:
+    def judge(self, base: IdentifiedModel, fuller: IdentifiedModel, columns: Mapping[str, np.ndarray],
+              min_gain: float | None = None) -> HeldOutEvidence:
         """Whether `fuller` (the base with an effect) beats `base` on the folds it was not fitted to.
 
         `columns` are the data with any column the effect adds (a delayed input). A fold fit that fails or
         diverges counts against the effect; so does one of `base` (a model that diverges on held-out data gives
-        no yardstick: no effect is accepted on it).
+        no yardstick: no effect is accepted on it). `min_gain`: this judgement's least relative drop, in place of
+        :attr:`min_gain`.
         """
+        min_gain = self.min_gain if min_gain is None else min_gain
         if self._base is None or self._base[0] is not base:
             try:
                 self._base = (base, self._fold_residuals(base, columns))
             except (DataError, np.linalg.LinAlgError, FloatingPointError):
                 self._base = (base, None)
         if self._base[1] is None:  # the model without the effect diverges on held-out data: nothing to judge by
-            return HeldOutEvidence(-math.inf, math.inf, math.inf, min_gain=self.min_gain)
+            return HeldOutEvidence(-math.inf, math.inf, math.inf, min_gain=min_gain)
         without = np.concatenate(self._base[1])
         try:
             folds = self._fold_residuals(fuller, columns)
         except (DataError, np.linalg.LinAlgError, FloatingPointError):
             return HeldOutEvidence(-math.inf, _nrmse_pct(without, self._spread(base, columns)), math.inf,
-                                   min_gain=self.min_gain)
+                                   min_gain=min_gain)
         with_ = np.concatenate(folds)
         spread = self._spread(base, columns)
         each = min(noise_z(a, b) for a, b in zip(self._base[1], folds, strict=True))
         return HeldOutEvidence(noise_z(without, with_), _nrmse_pct(without, spread), _nrmse_pct(with_, spread),
-                               each, self.min_gain)
+                               each, min_gain)
 
     def _spread(self, model: IdentifiedModel, columns: Mapping[str, np.ndarray]) -> np.ndarray:
         """Each state's standard deviation, in units of its noise level (the residuals' scale); NaN for a state

@@ -510,9 +510,8 @@ def _held_out(check: HeldOutCheck | None, base: IdentifiedModel, trial, columns:
     samples for a gravity the record hardly shows, -1.2 % held out, +91 % on the benchmark's twin record)."""
     if check is None:
         return True
-    kept, check.min_gain = check.min_gain, max(check.min_gain, LATER_GAIN if rebased else 0.0)
-    evidence = check.judge(base, trial.model, {**columns, **trial.new_columns})
-    check.min_gain = kept
+    evidence = check.judge(base, trial.model, {**columns, **trial.new_columns},
+                           max(check.min_gain, LATER_GAIN) if rebased else None)
     trial.candidate = replace(trial.candidate, explained={**trial.candidate.explained, **evidence.as_explained()})
     return evidence.passed
 
