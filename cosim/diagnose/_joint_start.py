@@ -28,6 +28,7 @@ from ..data.trajectory import Trajectory
 from ..errors import CosimError
 from ..identify.model import IdentifiedModel
 from ..identify.sindyc import SINDYc
+from ._free_run import _bounds
 from .candidates import EffectCandidate
 from .effects import EFFECTS, Roles
 
@@ -55,11 +56,9 @@ def joint_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mappin
     roles = Roles.of(current)
     inputs = [*current.inputs, *terms]
     signals = {**{s: columns[s] for s in current.states}, **{u: columns[u] for u in current.inputs}, **new}
-    n = len(signals[current.states[0]])
-    bounds = [*(segments or [0]), n]
     kinds = {**dict.fromkeys(current.states, "state"), **dict.fromkeys(inputs, "input")}
     records = [Trajectory.from_arrays(dt * np.arange(b - a), {k: signals[k][a:b] for k in kinds}, roles=kinds)
-               for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+               for a, b in _bounds(segments, len(signals[current.states[0]]))]
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
