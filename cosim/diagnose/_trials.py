@@ -152,7 +152,10 @@ def _absorbing(trial: IdentifiedModel, cand: EffectCandidate, absorbed: tuple[st
         alt = _without_absorbed(trial, cand, terms, screen) if terms else None
         if alt is None:
             continue
-        other = output_error_fit(alt[0], cols, dt, nuisances=best[2], iterations=40, **fit.kw)
+        try:
+            other = output_error_fit(alt[0], cols, dt, nuisances=best[2], iterations=40, **fit.kw)
+        except (DataError, np.linalg.LinAlgError, FloatingPointError):
+            continue  # (without a spring that also couples two masses the free run diverges: keep the terms)
         other_score = n * math.log(other[0].meta["refinement"]["cost"]) - alt[1] * math.log(n)
         if other_score < score:
             best, freed, score = other, alt[1], other_score
