@@ -1,4 +1,5 @@
-"""The held-out check of a diagnosis (cosim.diagnose._holdout) on a model that diverges.
+"""The held-out check of a diagnosis (cosim.diagnose._holdout) on a model that diverges, and on one that predicts
+its held-out data no better than their mean.
 
 A model whose free run diverges on the held-out half gives no yardstick: an effect is not judged against it,
 and the check says so (not passed) instead of raising. Record 31 of the generalisation benchmark reached this
@@ -9,6 +10,7 @@ run diverges" (exit 2) and reported nothing.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -48,3 +50,22 @@ def test_a_term_the_plant_has_passes():  # the same check where it can judge
                              dt=DT)
     evidence = check.judge(_model(-1.0), fuller, columns)
     assert evidence.passed and evidence.nrmse_with_pct < 0.5 * evidence.nrmse_without_pct
+
+
+def test_an_effect_whose_model_still_predicts_no_better_than_the_mean_is_not_a_finding():
+    """Record 101 of the generalisation benchmark: an offset took a base that predicts its held-out half at
+    2976 % NRMSE to 180 %, far beyond noise, and raised the error of the record's twin (585 % -> 1096 %)."""
+    from cosim.diagnose._holdout import PREDICTIVE_NRMSE, HeldOutEvidence
+    from cosim.diagnose.candidates import EffectCandidate
+    from cosim.diagnose.diagnosis_report import _message
+
+    assert PREDICTIVE_NRMSE == 100.0  # the mean's own NRMSE: the line a useful free run must be below
+    poor = HeldOutEvidence(statistic=50.0, nrmse_without_pct=2976.0, nrmse_with_pct=180.0, worst_fold=20.0)
+    assert not poor.passed and not poor.predictive
+    useful = HeldOutEvidence(statistic=50.0, nrmse_without_pct=297.6, nrmse_with_pct=18.0, worst_fold=20.0)
+    assert useful.passed and useful.predictive
+    rejected = EffectCandidate(name="offset", attached_to="constant", rows=("v",), nuisance=None, terms=("1",),
+                               delta_bic=-300.0, p_value=1e-9, explained=poor.as_explained(), significant=True)
+    message = _message([], {}, {}, SimpleNamespace(white=False), [rejected])  # (only its whiteness is read)
+    assert "offset on constant lowered the held-out error, but the model with it still predicts held-out data " \
+           "no better than their mean (NRMSE 180 %)" in message

@@ -18,6 +18,9 @@ with the effect's input copies (:mod:`._joint_start`).
 The lowest output error is kept. A fit that ends at a value the record does not show
 (:attr:`~cosim.diagnose.effects.Effect.shown`: a Stribeck velocity the speeds never reach twice of, a Coulomb
 friction fading at the top speed) is not kept; when none is left, the candidate is not significant.
+
+The round's trials are then taken best first, except that gravity goes before a softening spring to ground it
+ties with (``_bounded_first``).
 """
 
 from __future__ import annotations
@@ -31,9 +34,9 @@ import numpy as np
 from ..identify.model import IdentifiedModel
 from . import _record_band as rb
 from ._joint_start import has_joint_start, joint_start
-from ._ranking import _scores, record_band
+from ._ranking import TIE_BIC, _scores, record_band
 from ._record_band import RecordBand
-from ._trials import _cost_of, _fit_with, _FitOptions, _Trial
+from ._trials import _cost_of, _final_parameters, _fit_with, _FitOptions, _Trial
 from .candidates import EffectCandidate
 from .effects import EFFECTS, Effect
 from .screening import Nuisance, OutputErrorScreen
@@ -118,3 +121,30 @@ def _score_peaks(screen: OutputErrorScreen, effect: Effect, cand: EffectCandidat
                  and not (attachment.label == cand.attached_to and v == cand.nuisance)]
         out += sorted(peaks, key=lambda c: c.delta_bic)[:PEAKS]
     return out
+
+
+def _bounded_first(trials: list[_Trial], n_obs: int) -> list[_Trial]:
+    """Trials best first, except that gravity goes before a softening spring to ground it ties with.
+
+    A cubic spring to ground with ``k3 < 0`` (softening) and gravity (the sine of an angle) bend a restoring
+    force the same way, ``sin x = x - x^3/6 + ...``: over a travel of a radian or two they fit alike, the
+    spring one parameter cheaper (gravity has a phase). Beyond the travel the softening spring turns over and
+    the model runs away; the sine stays bounded. So when the gravity trial's BIC change is within one
+    parameter's price (``log n``, plus :data:`~cosim.diagnose._ranking.TIE_BIC`) of the softening spring's, the
+    bounded explanation is taken first. A hardening spring, or a gravity trial that fits worse by more, keeps
+    the order.
+    """
+    if len(trials) < 2:
+        return trials
+    top = trials[0]
+    cand = top.candidate
+    if cand.name != "cubic_stiffness" or "-" in cand.attached_to:
+        return trials
+    if not _final_parameters(cand, top.model).parameters.get("k3", 0.0) < 0.0:
+        return trials
+    n_eff = n_obs / max(float(cand.explained.get("correlation_factor", 1.0)), 1.0)
+    price = math.log(n_eff) + TIE_BIC
+    for j, trial in enumerate(trials[1:], start=1):
+        if trial.candidate.name == "gravity" and trial.candidate.delta_bic < cand.delta_bic + price:
+            return [trial, *trials[:j], *trials[j + 1:]]
+    return trials

@@ -13,7 +13,6 @@ actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio 
 * ``_retest_base`` - the base model's terms re-tested once an effect is in (a removal whose refit runs away
   does not stand);
 * ``_final_parameters`` - an accepted effect's physical parameters and standard errors from the final model;
-* ``_bounded_first`` - the order of a round's trials, gravity before a softening spring to ground it ties with;
 * ``_base_offset`` - the base model's constant, judged as an ``offset`` effect once the rounds are over;
 * ``_FitOptions`` - how every fit of one diagnosis treats the initial state and the noise levels.
 """
@@ -30,7 +29,6 @@ from scipy import stats
 
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
-from ._ranking import TIE_BIC
 from .candidates import EffectCandidate, _uncertainty
 from .effects import EFFECTS, Attachment, Effect, Roles
 from .screening import (
@@ -573,30 +571,3 @@ def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], colum
     except (DataError, np.linalg.LinAlgError, FloatingPointError):
         return None
     return refitted, nuis
-
-
-def _bounded_first(trials: list[_Trial], n_obs: int) -> list[_Trial]:
-    """Trials best first, except that gravity goes before a softening spring to ground it ties with.
-
-    A cubic spring to ground with ``k3 < 0`` (softening) and gravity (the sine of an angle) bend a restoring
-    force the same way, ``sin x = x - x^3/6 + ...``: over a travel of a radian or two they fit alike, the
-    spring one parameter cheaper (gravity has a phase). Beyond the travel the softening spring turns over and
-    the model runs away; the sine stays bounded. So when the gravity trial's BIC change is within one
-    parameter's price (``log n``, plus :data:`~cosim.diagnose._ranking.TIE_BIC`) of the softening spring's, the
-    bounded explanation is taken first. A hardening spring, or a gravity trial that fits worse by more, keeps
-    the order.
-    """
-    if len(trials) < 2:
-        return trials
-    top = trials[0]
-    cand = top.candidate
-    if cand.name != "cubic_stiffness" or "-" in cand.attached_to:
-        return trials
-    if not _final_parameters(cand, top.model).parameters.get("k3", 0.0) < 0.0:
-        return trials
-    n_eff = n_obs / max(float(cand.explained.get("correlation_factor", 1.0)), 1.0)
-    price = math.log(n_eff) + TIE_BIC
-    for j, trial in enumerate(trials[1:], start=1):
-        if trial.candidate.name == "gravity" and trial.candidate.delta_bic < cand.delta_bic + price:
-            return [trial, *trials[:j], *trials[j + 1:]]
-    return trials

@@ -76,10 +76,9 @@ from ..identify.model import IdentifiedModel
 from ._analysis_rate import analysis_factor, at_record_rate
 from ._holdout import LATER_GAIN, HeldOutCheck
 from ._ranking import _round, check_effect_selection, record_band
-from ._starts import trial_fit
+from ._starts import _bounded_first, trial_fit
 from ._trials import (
     _base_offset,
-    _bounded_first,
     _cost_of,
     _drop_redundant,
     _final_parameters,
@@ -92,7 +91,7 @@ from ._trials import (
     _sigma,
 )
 from .candidates import EffectCandidate
-from .diagnosis_report import DiagnosisReport, _figures
+from .diagnosis_report import DiagnosisReport, _figures, _message
 from .effects import EFFECTS, effect_names
 from .residuals import ResidualAnalysis, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit
@@ -570,24 +569,6 @@ def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: Resi
         pooled[key] = None if any(v is None for v in values) else float(np.average(values, weights=weights))
     pooled["per_state"] = per[0]["per_state"]
     return pooled
-
-
-def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after: Mapping[str, Any],
-             res_before: ResidualAnalysis, rejected: Sequence[EffectCandidate]) -> str:
-    """The report's one sentence."""
-    if found:
-        return "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
-            f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
-    held = [c for c in rejected if c.explained.get("plausible", True) is not False]
-    odd = [c for c in rejected if c.explained.get("plausible", True) is False]
-    tried = ("; " + ", ".join(f"{c.name} on {c.attached_to}" for c in held) +
-             " lowered the error on the data it was fitted to but not on held-out data") if held else ""
-    tried += ("; " + ", ".join(f"{c.name} on {c.attached_to}" for c in odd) +
-              " was accepted, then refitted to parameters the plant cannot have, and dropped") if odd else ""
-    if res_before.white:
-        return "no effect found: the residual is white, the model explains the data" + tried
-    return ("no effect found: the residual is not white, but no catalogued effect explains it "
-            "(the model lacks something the catalogue does not cover)" + tried)
 
 
 def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisances: Sequence[Nuisance]) -> None:

@@ -9,8 +9,9 @@
 
 from __future__ import annotations
 
+import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from ..data.trajectory import Trajectory
 from ..identify.metrics import max_deviation_pct, nrmse_fit_pct, r2
 from ..identify.model import IdentifiedModel
 from ..report import Report
+from ._holdout import HELD_OUT_T, PREDICTIVE_NRMSE
 from .candidates import EffectCandidate
 from .residuals import ResidualAnalysis
 
@@ -239,3 +241,28 @@ def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
                         "max_dev_pct": float(dev[i])} for i, name in enumerate(model.states)}
     return {"r2": float(np.mean(rr)), "nrmse_pct": float(np.mean(100.0 - fit)), "max_dev_pct": float(np.mean(dev)),
             "white": bool(res.white), "status": sim.status, "per_state": per_state}
+
+
+def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after: Mapping[str, Any],
+             res_before: ResidualAnalysis, rejected: Sequence[EffectCandidate]) -> str:
+    """The report's one sentence."""
+    if found:
+        return "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
+            f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
+    odd = [c for c in rejected if c.explained.get("plausible", True) is False]
+    # (an effect that beat noise on held-out data, with a model that still predicts them no better than their mean)
+    poor = [c for c in rejected if c not in odd and c.explained.get("held_out_t", -math.inf) >= HELD_OUT_T
+            and c.explained.get("held_out_nrmse_with_pct", 0.0) >= PREDICTIVE_NRMSE]
+    held = [c for c in rejected if c not in odd and c not in poor]
+    tried = ("; " + ", ".join(f"{c.name} on {c.attached_to}" for c in held) +
+             " lowered the error on the data it was fitted to but not on held-out data") if held else ""
+    tried += "".join(f"; {c.name} on {c.attached_to} lowered the held-out error, but the model with it still "
+                     f"predicts held-out data no better than their mean (NRMSE "
+                     f"{c.explained['held_out_nrmse_with_pct']:.3g} %): identify a better base model first"
+                     for c in poor)
+    tried += ("; " + ", ".join(f"{c.name} on {c.attached_to}" for c in odd) +
+              " was accepted, then refitted to parameters the plant cannot have, and dropped") if odd else ""
+    if res_before.white:
+        return "no effect found: the residual is white, the model explains the data" + tried
+    return ("no effect found: the residual is not white, but no catalogued effect explains it "
+            "(the model lacks something the catalogue does not cover)" + tried)
