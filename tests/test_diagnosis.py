@@ -62,9 +62,7 @@ def _run(parameters, seed, excitation, duration):
     # 3 s: the stiction shows only at the speed reversals (2 s: Fs 10.7 % low)
     ({"Fs": 150.0, "vs": 0.02}, "stribeck", "omega_m", "Fs", 150.0, 0.10, MULTISINE, 3.0),
     ({"delay": 0.002}, "delay", "Tm", "delay_s", 0.002, 0.10, MULTISINE, 2.0),
-    pytest.param({"backlash": 5e-5}, "backlash", "theta_m-theta_L", "half_width", 5e-5, 0.10, MULTISINE, 2.0,
-                 marks=pytest.mark.xfail(strict=True, reason="issue 13, default path: backlash named, half-width "
-                                         "5.95e-5 (+19 %), free-run NRMSE 5.51 -> 2.61 % only")),
+    ({"backlash": 5e-5}, "backlash", "theta_m-theta_L", "half_width", 5e-5, 0.10, MULTISINE, 2.0),
     ({"Toffset": 100.0}, "offset", "constant", "offset_omega_m", 100.0, 0.10, MULTISINE, 2.0),
     # the linear model identified on the multisine runs at 130 % NRMSE on the slew
     ({"Tcog": 150.0}, "cogging", "theta_m", "amplitude_omega_m", 150.0, 0.10, SLEW, 3.0),

@@ -5,8 +5,7 @@ The score test ranks the candidates to first order only. The leading ones are fi
 actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio p-value, size):
 
 * ``_fit_with`` - the model refitted with one candidate added: rows where the effect is not clearly non-zero
-  are pruned (``_prune_rows``), a nuisance the data pin only through a product is moved to its physical value
-  (``_physical_nuisance``); a dead zone or saturation starts tied to its input's gain (``_tied_start``); an
+  are pruned (``_prune_rows``); a dead zone or saturation starts tied to its input's gain (``_tied_start``); an
   effect that linearises to base terms (gravity: a spring and a constant) is also fitted without them
   (``_without_absorbed``), BIC choosing;
 * ``_drop_redundant`` - the backward check: an effect found earlier goes when a later one makes it redundant;
@@ -30,7 +29,7 @@ from scipy import stats
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
 from .candidates import EffectCandidate, _uncertainty
-from .effects import EFFECTS, Attachment, Effect, Roles
+from .effects import EFFECTS, Attachment, Roles
 from .screening import (
     Nuisance,
     OutputErrorScreen,
@@ -223,8 +222,6 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                                                   dt, screen, fit)
         if own is not None:
             cand = replace(cand, nuisance=nuis[-1].value, terms=nuis[-1].terms, nuisance_se=nuis[-1].std_error)
-        if effect.physical is not None:
-            model, se, nuis, cand = _physical_nuisance(model, cand, effect, placed, cols, dt, nuis, iterations, fit)
         pruned = _prune_rows(model, se, cand)
         if pruned is not None:
             model, cand = pruned
@@ -261,34 +258,6 @@ def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[
     p_value = float(stats.chi2.sf((cost0 - cost1) / variance, max(q, 1)))
     size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
     return delta_bic, p_value, size, factor
-
-
-def _physical_nuisance(model: IdentifiedModel, cand: EffectCandidate, effect: Effect, placed: Attachment,
-                       cols: dict[str, np.ndarray], dt: float, nuis: list[Nuisance], iterations: int,
-                       fit: _FitOptions):
-    """Move a nuisance the data pin only through a product (a backlash's width) to its physical value.
-
-    The term is rewritten at the value :attr:`Effect.physical` gives, its coefficients scaled to keep the
-    product, and the model refitted; twice, since the part of the record inside the band changes with it.
-    """
-    se = np.zeros_like(model.coef)
-    for _ in range(2):
-        coef = {row: model.coef[model.states.index(row), [model.terms.index(t) for t in cand.terms]]
-                for row in cand.rows if all(t in model.terms for t in cand.terms)}
-        value = effect.physical(coef, float(cand.nuisance), Roles.of(model), placed) if coef else None
-        if value is None or abs(math.log(value / cand.nuisance)) < 0.01:
-            break
-        terms, matrix = list(model.terms), model.coef.copy()
-        new_terms = effect.terms(placed, value)
-        for old, new in zip(cand.terms, new_terms, strict=True):
-            k = terms.index(old)
-            terms[k] = new
-            matrix[:, k] *= cand.nuisance / value
-        moved = IdentifiedModel(states=model.states, inputs=model.inputs, terms=tuple(terms), coef=matrix,
-                                dt=model.dt, meta=model.meta)
-        model, se, nuis = output_error_fit(moved, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
-        cand = replace(cand, nuisance=value, terms=new_terms)
-    return model, se, nuis, cand
 
 
 def _remove_effect(current: IdentifiedModel, cand: EffectCandidate, own: int | None, nuisances: list[Nuisance],
