@@ -388,7 +388,9 @@ def test_tune_two_mass_servo(servo_pid):
     assert peaks and max(peaks) <= 0.5 and 1 / max(peaks) == pytest.approx(info["gain_margin"], rel=2e-3)
     w_all = np.concatenate([np.geomspace(1e-3, math.pi / STUDY_DT, 20000), w])
     distance = np.abs(1 + loop.frequency_response(w_all).complex.ravel())
-    assert distance.min() == pytest.approx(info["modulus_margin"], rel=1e-3)
+    # (the tuner's figure is python-control's, the minimum of a spline through its frequency grid: control 0.10.2
+    # puts it 0.11 % below this dense grid's minimum)
+    assert distance.min() == pytest.approx(info["modulus_margin"], rel=2e-3)
     assert info["step_overshoot_pct"] <= 10.0
 
 
