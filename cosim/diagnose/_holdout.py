@@ -146,7 +146,8 @@ class HeldOutEvidence:
         """The figures as entries of :attr:`EffectCandidate.explained`."""
         return {"held_out_t": self.statistic, "held_out_worst_fold_t": self.worst_fold,
                 "held_out_nrmse_without_pct": self.nrmse_without_pct,
-                "held_out_nrmse_with_pct": self.nrmse_with_pct, "held_out_passed": self.passed}
+                "held_out_nrmse_with_pct": self.nrmse_with_pct, "held_out_predictive": self.predictive,
+                "held_out_passed": self.passed}
 
 
 def _nrmse_pct(residual: np.ndarray, spread: np.ndarray) -> float:

@@ -22,7 +22,7 @@ from ..data.trajectory import Trajectory
 from ..identify.metrics import max_deviation_pct, nrmse_fit_pct, r2
 from ..identify.model import IdentifiedModel
 from ..report import Report
-from ._holdout import HELD_OUT_T, PREDICTIVE_NRMSE
+from ._holdout import HELD_OUT_T
 from .candidates import EffectCandidate
 from .residuals import ResidualAnalysis
 
@@ -252,7 +252,7 @@ def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after:
     odd = [c for c in rejected if c.explained.get("plausible", True) is False]
     # (an effect that beat noise on held-out data, with a model that still predicts them no better than their mean)
     poor = [c for c in rejected if c not in odd and c.explained.get("held_out_t", -math.inf) >= HELD_OUT_T
-            and c.explained.get("held_out_nrmse_with_pct", 0.0) >= PREDICTIVE_NRMSE]
+            and c.explained.get("held_out_predictive", True) is False]
     held = [c for c in rejected if c not in odd and c not in poor]
     tried = ("; " + ", ".join(f"{c.name} on {c.attached_to}" for c in held) +
              " lowered the error on the data it was fitted to but not on held-out data") if held else ""
