@@ -9,11 +9,12 @@ delay's screening promises a BIC change of -14 300, the trial realises +1.
 An effect whose terms are copies of an input (a delay's delayed inputs; not an input tied to its own gain, as
 a saturation is) keeps the model linear in its coefficients. So the base can be identified again with those
 copies as inputs, by the identification's own multi-start output-error refinement (exact Jacobians, a second
-or two), and the trial started from that fit as well: on record 4 it realises -28 000 and the delay comes out at
-14.2 samples; on record 78 at 10.7 (true 10.75), where the first start had left it at -27.8 and nothing was
-named. Effects on states (a friction, a cogging) would need their terms simulated, not measured, which the
-linear identification cannot do: started from a fit on the measured signals, a cogging's trial drifted (record
-150: 60 times the base's cost).
+or two; only its starts without the continuation prior, the winners on records 4 and 28: the timing record's
+diagnosis takes 11.7 s instead of 12.6), and the trial started from that fit as well: on record 4 it realises
+-28 000 and the delay comes out at 14.2 samples; on record 78 at 10.7 (true 10.75), where the first start had
+left it at -27.8 and nothing was named. Effects on states (a friction, a cogging) would need their terms
+simulated, not measured, which the linear identification cannot do: started from a fit on the measured signals,
+a cogging's trial drifted (record 150: 60 times the base's cost).
 """
 
 from __future__ import annotations
@@ -64,8 +65,8 @@ def joint_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mappin
             warnings.simplefilter("ignore")
             fitted = SINDYc(library="linear", include_constant="1" in current.terms, threshold=0.0,
                             kinematics=dict(roles.velocity_of) or "none", refine="output_error",
-                            allow_unstable=True, decimate=1).fit(records, states=list(current.states),
-                                                                 inputs=inputs).model_
+                            refine_options={"prior": 0.0}, allow_unstable=True,
+                            decimate=1).fit(records, states=list(current.states), inputs=inputs).model_
     except (CosimError, np.linalg.LinAlgError, FloatingPointError):
         return None
     coef = np.array([[fitted.coef[fitted.states.index(s), fitted.terms.index(t)] if t in fitted.terms else 0.0
