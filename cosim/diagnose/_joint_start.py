@@ -46,8 +46,9 @@ def joint_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mappin
     """The base part and the candidate (its coefficients in every dynamic row) of a linear model identified on
     the records with `cand`'s terms as extra inputs; None when the effect has no such terms or the fit fails.
 
-    The identification is the default one (linear library, output-error multi-start), with the current model's
-    constant and kinematic rows; coefficients the current model holds at zero stay zero.
+    The identification is the default one (linear library, output-error multi-start, here from its starts
+    without the continuation prior), with the current model's constant and kinematic rows; coefficients the
+    current model holds at zero stay zero.
     """
     effect = EFFECTS[cand.name]
     new = effect.columns(cand.placement, cand.nuisance, columns)
