@@ -222,6 +222,7 @@ def test_records_with_different_steps(clean):
     ({"terms": ["import os"]}, "not a valid expression"),
     ({"degree": 0}, "degree must be"),
     ({"refine_options": {"speed": 1}}, "unknown refine_options"),
+    ({"prefer_stable": "yes"}, "prefer_stable must be True, False or None"),
 ])
 def test_bad_settings(kwargs, match):
     with pytest.raises(InvalidSettingError, match=match):

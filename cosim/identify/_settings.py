@@ -118,6 +118,8 @@ def _check_settings(est: Any) -> None:
         raise InvalidSettingError(f'decimate must be "auto" or a positive integer, got {est.decimate!r}')
     if not isinstance(est.allow_unstable, bool):
         raise InvalidSettingError(f"allow_unstable must be True or False, got {est.allow_unstable!r}")
+    if est.prefer_stable is not None and not isinstance(est.prefer_stable, bool):
+        raise InvalidSettingError(f"prefer_stable must be True, False or None, got {est.prefer_stable!r}")
     if est.refine not in _REFINE:
         raise InvalidSettingError(f"refine must be None or 'output_error', got {est.refine!r}")
     if not isinstance(est.refine_initial_state, bool):
@@ -126,3 +128,11 @@ def _check_settings(est: Any) -> None:
     if extra:
         raise InvalidSettingError(f"unknown refine_options {', '.join(sorted(extra))}; valid: prior, "
                                   "continuation, max_nfev")
+
+
+#: The settings of ``SINDYc()`` (its ``repr`` shows the others).
+_DEFAULTS = {"library": "linear", "degree": 2, "terms": [], "include_constant": True, "threshold": "auto",
+             "ridge": 0.0, "differentiation": "integral", "differentiation_options": {}, "noise_compensation": True,
+             "kinematics": "auto", "velocities": {}, "velocity_method": "auto", "velocity_options": {},
+             "derive_window": None, "refine": None, "refine_initial_state": True, "refine_options": {},
+             "allow_unstable": False, "decimate": "auto", "prefer_stable": None}

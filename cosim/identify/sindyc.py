@@ -134,7 +134,7 @@ from ._equation_error import _equations, _window
 from ._library import _kinematic_rows, _library_terms
 from ._records import _known_initial_states, _measured, _prepare, _stacked, _warn_constant_inputs
 from ._refinement import _analysis_runs, _refine_decimated, _starts
-from ._settings import DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
+from ._settings import _DEFAULTS, DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
 from ._sparse_regression import _sparse_fit
 from ._stability import _stability, _unstable
 from .kinematics import _find_kinematics
@@ -212,6 +212,9 @@ class SINDYc:
     allow_unstable : bool
         Keep an unstable identified model with an :class:`IdentificationWarning` instead of raising
         :class:`~cosim.errors.UnstableModelError`.
+    prefer_stable : bool, optional
+        With refinement, a stable refinement of the multi-start wins over an unstable one that costs less by up
+        to a factor 2. Default: when unstable models are refused (``not allow_unstable``).
     decimate : "auto" or int
         With refinement, the multi-start runs on the records decimated by this factor
         (:func:`~cosim.data.decimation.decimate`), and its winner is refined once more on the records as given.
@@ -256,7 +259,7 @@ class SINDYc:
                  velocity_options: Mapping[str, Any] | None = None, derive_window: int | None = None,
                  refine: str | None = None, refine_initial_state: bool = True,
                  refine_options: Mapping[str, Any] | None = None, allow_unstable: bool = False,
-                 decimate: int | str = "auto") -> None:
+                 decimate: int | str = "auto", prefer_stable: bool | None = None) -> None:
         self.library = library
         self.degree = degree
         self.terms = tuple(terms) if not isinstance(terms, str) else (terms,)
@@ -276,6 +279,7 @@ class SINDYc:
         self.refine_options = dict(refine_options or {})
         self.allow_unstable = allow_unstable
         self.decimate = decimate
+        self.prefer_stable = prefer_stable
         _check_settings(self)
 
     # -------------------------------------------------------------------------------------------- settings
@@ -299,7 +303,7 @@ class SINDYc:
                 "derive_window": self.derive_window,
                 "refine": self.refine, "refine_initial_state": self.refine_initial_state,
                 "refine_options": dict(self.refine_options), "allow_unstable": self.allow_unstable,
-                "decimate": self.decimate}
+                "decimate": self.decimate, "prefer_stable": self.prefer_stable}
 
     # -------------------------------------------------------------------------------------------- fitting
     # one BLAS thread: the same data give the same model on every run (two OpenBLAS threads split sums in an
@@ -401,7 +405,8 @@ class SINDYc:
             model = _refine_decimated(starts, runs, coarse, factor, dt, kin, sparse.coef_scale, meta, known_x0,
                                       refine_options=self.refine_options,
                                       refine_initial_state=self.refine_initial_state, prune=self.threshold == "auto",
-                                      prefer_stable=not self.allow_unstable)
+                                      prefer_stable=not self.allow_unstable if self.prefer_stable is None
+                                      else self.prefer_stable)
             if self.threshold == "auto":
                 threshold = meta["threshold"]["value"]
         meta["seconds"]["total"] = time.perf_counter() - started
@@ -591,9 +596,3 @@ class SINDYc:
         changed = {k: v for k, v in self.get_params().items() if v != _DEFAULTS.get(k)}
         return f"SINDYc({', '.join(f'{k}={v!r}' for k, v in changed.items())})"
 
-
-_DEFAULTS = {"library": "linear", "degree": 2, "terms": [], "include_constant": True, "threshold": "auto",
-             "ridge": 0.0, "differentiation": "integral", "differentiation_options": {}, "noise_compensation": True,
-             "kinematics": "auto", "velocities": {}, "velocity_method": "auto", "velocity_options": {},
-             "derive_window": None, "refine": None, "refine_initial_state": True, "refine_options": {},
-             "allow_unstable": False, "decimate": "auto"}
