@@ -65,10 +65,7 @@ settings = dict(library="linear", include_constant=True, threshold=0.0,
 start = time.perf_counter()
 # one identification, timed: a cosim that refuses unstable models is asked to keep it (the run says so), rather
 # than timed through a refusal and a second fit
-parameters = inspect.signature(SINDYc).parameters
-unstable_kw = {"allow_unstable": True} if "allow_unstable" in parameters else {}
-if "prefer_stable" in parameters:  # as cosim diagnose's own identification
-    unstable_kw["prefer_stable"] = True
+unstable_kw = {"allow_unstable": True} if "allow_unstable" in inspect.signature(SINDYc).parameters else {}
 model = SINDYc(**settings, **unstable_kw).fit(traj, states=states, inputs=inputs).model_
 allowed_unstable = bool(unstable_kw) and model.meta.get("stable") is False
 identify_s = time.perf_counter() - start

@@ -101,14 +101,11 @@ __all__ = ["diagnose"]
 
 #: How ``cosim diagnose`` identifies the model it diagnoses when none is given (SINDYc settings): every linear
 #: term, kinematic rows found from the names and the data, refined by output error. A slightly unstable result
-#: is accepted: a spring standing in for friction is what the diagnosis finds and removes. But, as in ``cosim
-#: identify``, a stable refinement of the multi-start wins over an unstable one that costs less by up to a factor
-#: 2: a machine is passive, and from a base that runs away the trials do not find what it lacks (generalisation
-#: benchmark, 200 records: right first 75.5 -> 77 %, records 61, 69 and 112 named; 7 records change). The
-#: constant stays in the base (tried without it: on EMPS a spring to ground then stands in for the offset and is
-#: not removed); once the rounds are over it is judged as an ``offset`` effect (``_trials._base_offset``).
+#: is accepted: a spring standing in for friction is what the diagnosis finds and removes. The constant stays
+#: in the base (tried without it: on EMPS a spring to ground then stands in for the offset and is not removed);
+#: once the rounds are over it is judged as an ``offset`` effect (``_trials._base_offset``).
 BASE_SETTINGS = {"library": "linear", "include_constant": True, "threshold": 0.0, "kinematics": "auto",
-                 "refine": "output_error", "allow_unstable": True, "prefer_stable": True}
+                 "refine": "output_error", "allow_unstable": True}
 #: Default significance level of one candidate (strict: a few hundred candidates are tried).
 ALPHA = 1e-6
 #: Default least BIC decrease of a significant candidate.
