@@ -13,7 +13,9 @@ drifts. For an effect with :attr:`~cosim.diagnose.effects.Effect.multistart`:
   values, :data:`PEAKS` more at every place it attaches, each a peak of the score (not next to a better value).
 
 An effect on an input whose base took it up elsewhere (a delay) is also started from the base identified again
-with the effect's input copies (:mod:`._joint_start`).
+with the effect's input copies; an effect on states whose trial realises less than half of the BIC change its
+screening promised (:func:`_unrealised`), from the equation-error fit of the base's terms and its own
+(:mod:`._joint_start`).
 
 The lowest output error is kept. A fit that ends at a value the record does not show
 (:attr:`~cosim.diagnose.effects.Effect.shown`: a Stribeck velocity the speeds never reach twice of, a Coulomb
@@ -33,7 +35,7 @@ import numpy as np
 
 from ..identify.model import IdentifiedModel
 from . import _record_band as rb
-from ._joint_start import has_joint_start, joint_start
+from ._joint_start import has_joint_start, has_state_start, joint_start
 from ._ranking import TIE_BIC, _scores, record_band
 from ._record_band import RecordBand
 from ._trials import _cost_of, _final_parameters, _fit_with, _FitOptions, _Trial
@@ -54,19 +56,24 @@ PEAKS = 2
 def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
               min_size: float, fit: _FitOptions, names: Sequence[str], iterations: int,
-              band: RecordBand | None = None) -> _Trial | None:
+              band: RecordBand | None = None, realised: float = 0.0) -> _Trial | None:
     """`cand` fitted with `iterations` Gauss-Newton steps, from several starts if its effect asks (module notes).
 
     `names` is the effect selection: a nuisance value the user fixed (``"stribeck:vs=0.3"``) is not searched;
-    `band` what the record shows (default: from the screen, as the round's ranking had it)."""
+    `band` what the record shows (default: from the screen, as the round's ranking had it); `realised` the best
+    BIC change a trial of the round has realised so far: a re-identified start, which costs an identification,
+    is made only for a candidate whose screening promises more (it could not come first otherwise)."""
     effect = EFFECTS[cand.name]
     searched = effect.multistart and cand.nuisance is not None \
         and not any(n.startswith(cand.name + ":") for n in names)
     if not searched:
         trial = _fit_with(current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                           iterations=iterations)
-        return _joint(trial, current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
-                      iterations) if has_joint_start(cand.name) else trial
+        if cand.delta_bic < realised and (has_joint_start(cand.name)
+                                          or (has_state_start(cand.name) and _unrealised(trial, cand))):
+            return _joint(trial, current, cand, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
+                          iterations)
+        return trial
     band = band if band is not None else record_band(screen)
     if effect.integer:
         starts = [cand, *_score_peaks(screen, effect, cand, band, alpha, bic_margin, min_size)]
@@ -92,6 +99,11 @@ def trial_fit(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     return best
 
 
+def _unrealised(trial: _Trial | None, cand: EffectCandidate) -> bool:
+    """Whether the trial fit realised less than half the BIC change the screening promised."""
+    return trial is None or not trial.candidate.significant or trial.candidate.delta_bic > 0.5 * cand.delta_bic
+
+
 def _joint(trial: _Trial | None, current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray],
            dt: float, nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
            min_size: float, fit: _FitOptions, iterations: int) -> _Trial | None:
@@ -101,7 +113,7 @@ def _joint(trial: _Trial | None, current: IdentifiedModel, cand: EffectCandidate
     if start is None:
         return trial
     other = _fit_with(start[0], start[1], columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
-                      iterations=iterations)
+                      iterations=iterations, own_start=True)
     if other is None or (trial is not None and _cost_of(trial.model) <= _cost_of(other.model)):
         return trial
     other.start = start[0]

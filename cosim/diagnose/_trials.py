@@ -178,8 +178,11 @@ class _Trial:
 
 def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str, np.ndarray], dt: float,
               nuisances: list[Nuisance], screen: OutputErrorScreen, alpha: float, bic_margin: float,
-              min_size: float, fit: _FitOptions, iterations: int = 15) -> _Trial | None:
-    """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error."""
+              min_size: float, fit: _FitOptions, iterations: int = 15, own_start: bool = False) -> _Trial | None:
+    """The model refitted with `cand` added (its nuisance parameter too), scored on the actual output error.
+
+    `own_start`: `current` and `cand`'s coefficients are a start of their own (:mod:`._joint_start`), not the
+    screen's base with the screening's estimate."""
     effect = EFFECTS[cand.name]
     placed = cand.placement
     new_cols = effect.columns(placed, cand.nuisance, columns)
@@ -203,8 +206,9 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     else:
         trial = _with_effect(current, cand, list(new_cols))
     own_x0 = screen.x0 if current is screen.model else _fitted_x0(current, fit.segments)  # (another start's own)
-    if free_run_cost(trial, cols, dt, own_x0, screen.sigma, segments=fit.segments,
-                     measured=fit.measured) > float(screen.residual @ screen.residual):
+    # (a start of its own, not the screen's base with the effect: the base's cost is no yardstick for it)
+    if not own_start and free_run_cost(trial, cols, dt, own_x0, screen.sigma, segments=fit.segments,
+                                                 measured=fit.measured) > float(screen.residual @ screen.residual):
         if tie is None:  # the score's one linear step overshoots (a drifting free run): start the effect from zero
             trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
         else:  # a tied effect has no zero to start from (its gain is the input's): it needs the steps back
