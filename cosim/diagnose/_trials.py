@@ -208,7 +208,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     own_x0 = screen.x0 if current is screen.model else _fitted_x0(current, fit.segments)  # (another start's own)
     # (a start of its own, not the screen's base with the effect: the base's cost is no yardstick for it)
     if not own_start and free_run_cost(trial, cols, dt, own_x0, screen.sigma, segments=fit.segments,
-                                                 measured=fit.measured) > float(screen.residual @ screen.residual):
+                                       measured=fit.measured) > float(screen.residual @ screen.residual):
         if tie is None:  # the score's one linear step overshoots (a drifting free run): start the effect from zero
             trial = _with_effect(current, replace(cand, coefficients=()), list(new_cols))
         else:  # a tied effect has no zero to start from (its gain is the input's): it needs the steps back
