@@ -33,7 +33,8 @@ Effects (named as cosim's catalogue names them; the main parameter, compared wit
     Every force is in the input's units (N or N m). Each effect's size is calibrated (secant steps on the
     logarithm of its parameter) so that its contribution, the RMS difference of the written signals between
     runs with and without it (same input; same reference in closed loop), is a drawn 3-12 times the noise's
-    standard deviation (accepted in 2-20), taken per signal and averaged in square.
+    standard deviation (accepted in 2-20), taken per signal and averaged in square; the noise is that of the
+    record with the effect (a share of its range, below).
     An effect the record cannot show as itself is replaced, as one out of reach of the calibration is, by
     another drawn at random (four tries in all), so that the table scores diagnoses, not records no tool could
     answer: a linear model must not take up its whole force over the record (the share it leaves,
@@ -44,8 +45,9 @@ Effects (named as cosim's catalogue names them; the main parameter, compared wit
 
 Records
     200 Hz-5 kHz, 5-60 s (a record longer than ``max_samples`` is shortened, then its rate lowered, never
-    below 5 s); noise 0.2-5 % of each written state's range, white Gaussian, per signal (the input is a
-    command, written exactly); a quarter of the records write positions only (then ``--derive POS``);
+    below 5 s); noise 0.2-5 % of each written state's range (as written, with its effects), white Gaussian,
+    per signal (the input is a command, written exactly); a quarter of the records write positions only
+    (then ``--derive POS``);
     excitation multisine, PRBS, steps, or closed loop (a PID on the position, sampled at the record rate,
     tracking a reference). Record ``i`` is drawn from seed ``i``, fully reproducible; its held-out twin is
     the same plant and effects with another excitation (and noise) seed.
@@ -87,8 +89,9 @@ RATIO_ACCEPT = (2.0, 20.0)
 LINEAR_SHARE = 1e-3
 #: Least periods of a cogging over its position's range in the record.
 MIN_PERIODS = 2.0
-#: Written into truth.json; a record of another version is generated again.
-GENERATOR_VERSION = 2
+#: Written into truth.json; a record of another version is generated again. Version 3: the noise is a share
+#: of the range of each signal as written (with its effects), no longer of the run without them.
+GENERATOR_VERSION = 3
 
 
 # ---------------------------------------------------------------------------------------------- plants
@@ -395,9 +398,10 @@ class _Run:
     """Simulations of one record's plant and excitation, with a given effect list."""
 
     def __init__(self, plant: Plant, dt: float, n: int, u: np.ndarray | None, reference: np.ndarray | None,
-                 pid: dict | None, written: list[str], sigma: dict[str, float] | None = None):
+                 pid: dict | None, written: list[str], sigma: dict[str, float] | None = None,
+                 noise_frac: float | None = None):
         self.plant, self.dt, self.n, self.u, self.ref, self.pid = plant, dt, n, u, reference, pid
-        self.written, self.sigma = written, sigma
+        self.written, self.sigma, self.noise_frac = written, sigma, noise_frac
 
     def run(self, effects: list[dict], n: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         n = self.n if n is None else n
@@ -405,11 +409,17 @@ class _Run:
                         reference=None if self.ref is None else self.ref[:n], pid=self.pid)
 
     def ratio(self, base: np.ndarray, with_effect: np.ndarray) -> float:
-        """The contribution over the noise: per written signal RMS(difference)/sigma, averaged in square."""
+        """The contribution over the noise: per written signal RMS(difference)/sigma, averaged in square.
+
+        With ``noise_frac`` set, sigma is that share of each signal's range in `with_effect` (the noise of the
+        record as it would be written with the effect); otherwise the fixed ``sigma``."""
         idx = [self.plant.states.index(s) for s in self.written]
         m = len(base)
         diff = with_effect[:m, idx] - base[:m, idx]
-        sig = np.array([self.sigma[s] for s in self.written])
+        if self.noise_frac is not None:
+            sig = self.noise_frac * np.ptp(with_effect[:m, idx], axis=0)
+        else:
+            sig = np.array([self.sigma[s] for s in self.written])
         return float(np.sqrt(np.mean((np.sqrt(np.mean(diff ** 2, axis=0)) / sig) ** 2)))
 
 
@@ -526,10 +536,13 @@ def _draw_sizes(rng: np.random.Generator, max_samples: int) -> tuple[float, floa
     return 1.0 / rate, duration, n
 
 
-def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_only: bool = True) -> Record:
+def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_only: bool = True,
+                noise_of_effect_free: bool = False) -> Record:
     """Record `index` (seed `index`): plant, effects calibrated to 2-20x the noise, training data and twin.
 
-    ``shown_only=False`` keeps an effect the record cannot show as itself (the first version's records)."""
+    ``shown_only=False`` keeps an effect the record cannot show as itself (the first version's records);
+    ``noise_of_effect_free=True`` sizes the noise on the run without effects (the second version's records:
+    an effect that shrinks the motion, a saturation, left noise of up to 17 times the written signal's range)."""
     rng = np.random.default_rng([index, 0])
     dt, duration, n = _draw_sizes(rng, max_samples)
     rate = 1.0 / dt
@@ -561,7 +574,7 @@ def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_onl
         scale = target_range / max(float(np.ptp(probe[:, 0])), 1e-12)
         u, u_twin = scale * u0, scale * open_input([index, 3])
     written = list(plant.positions) if positions_only else list(plant.states)
-    run = _Run(plant, dt, n, u, ref, pid, written)
+    run = _Run(plant, dt, n, u, ref, pid, written, noise_frac=None if noise_of_effect_free else noise_frac)
     base, cmd = run.run([])
     if not np.all(np.isfinite(base)) or np.max(np.abs(base)) > 1e6:
         raise RuntimeError(f"record {index}: the plant without effects diverges")
@@ -599,6 +612,8 @@ def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_onl
                                    if e not in [x["name"] for x in effects]]))
     final, cmd_final = run.run(effects) if effects else (base, cmd)
     combined = run.ratio(base, final) if effects else 0.0
+    if not noise_of_effect_free:  # the issue's noise: a share of each signal's range as written
+        run.sigma = {s: noise_frac * float(np.ptp(final[:, plant.states.index(s)])) for s in written}
 
     noise_rng = np.random.default_rng([index, 2])
     t = np.arange(n + 1) * dt

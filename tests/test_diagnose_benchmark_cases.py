@@ -62,7 +62,8 @@ import independent_plants as ip  # noqa: E402
 
 def _diagnose(index: int, folder: Path, *options: str, shown_only: bool = True) -> tuple[dict, dict]:
     """The record's spec and ``cosim diagnose``'s JSON on it (signal names only, and `options`)."""
-    record = ip.make_record(index, max_samples=4000, shown_only=shown_only)
+    # the records as the generator's second version drew them (the noise a share of the effect-free run's range)
+    record = ip.make_record(index, max_samples=4000, shown_only=shown_only, noise_of_effect_free=True)
     assert not record.cli["derive"]  # (every state measured)
     record.write(folder)
     result = CliRunner().invoke(main, ["diagnose", str(folder / "train.csv"), "--state", ",".join(record.cli["states"]),
