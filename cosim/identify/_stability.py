@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from scipy import linalg
 
 from ..errors import IdentificationWarning, UnstableModelError
 from .model import IdentifiedModel
@@ -83,3 +84,59 @@ def fastest_mode_hz(model: IdentifiedModel) -> float:
     """The modulus of the largest eigenvalue of the model's linear part, in Hz (0.0 for no states' terms)."""
     a = model.linear_part().linear_matrices()[0]
     return float(np.max(np.abs(np.linalg.eigvals(a)))) / (2.0 * math.pi) if a.size else 0.0
+
+
+def stabilised(model: IdentifiedModel, coef: np.ndarray, movable: np.ndarray, limit: float,
+               states: np.ndarray, steps: int = 20) -> np.ndarray | None:
+    """`coef` of a linear `model` with its modes that grow faster than `limit` (1/s) reflected into the left
+    half-plane, by least-change steps on the `movable` coefficients: None when it does not get there.
+
+    A start for the output-error refinement, not a fit: an unstable mode the data do not excite costs nothing in
+    the free run, and its mirror image (the same speed, decaying) costs about as little, the way a subspace or
+    prediction-error method reflects an unstable pole to enforce stability (e.g. MATLAB's ``ssest`` with
+    ``EnforceStability``). The model's structure stays: kinematic rows are not movable, so the reflection is
+    made by first-order eigenvalue sensitivities (``d lambda = w^H dA v``) on the dynamic rows' state
+    coefficients: the change that moves each unstable eigenvalue's real part to minus itself at the least cost
+    in equation error on the records' `states` (samples x states; the change a row's terms make there, in
+    square), repeated until every real part is at most `limit`. So the data's least-determined directions move
+    (two positions a stiff shaft keeps together: the shaft's stiffness), not what the data pin down.
+    """
+    work = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms,
+                           coef=np.array(coef, dtype=float), dt=model.dt)
+    if not work.is_linear:
+        return None
+    columns = [work.terms.index(s) if s in work.terms else -1 for s in work.states]
+    entries = [(i, j) for i in range(len(work.states)) for j, k in enumerate(columns)
+               if k >= 0 and movable[i, k]]
+    if not entries:
+        return None
+    gram = states.T @ states / len(states)
+    weight = np.array([[gram[j, j2] if i == i2 else 0.0 for i2, j2 in entries] for i, j in entries])
+    weight += 1e-9 * np.trace(weight) / len(entries) * np.eye(len(entries))
+    for _ in range(steps):
+        a = work.linear_matrices()[0]
+        # (left and right eigenvectors matched: the unstable modes are simple even where a rigid body's are not)
+        lam, left, right = linalg.eig(a, left=True, right=True)
+        bad = [k for k in range(len(lam)) if lam[k].real > limit and lam[k].imag >= 0.0]
+        if not bad:
+            return work.coef
+        norms = [complex(left[:, k].conj() @ right[:, k]) for k in bad]
+        if any(abs(v) < 1e-12 for v in norms):
+            return None
+        gain = np.array([[(left[i, k].conj() * right[j, k] / v).real for i, j in entries]
+                         for k, v in zip(bad, norms, strict=True)])
+        change = np.array([-2.0 * lam[k].real for k in bad])
+        # least cost d' W d with gain d = change: d = W^-1 G' (G W^-1 G')^-1 change
+        spread = np.linalg.solve(weight, gain.T)
+        try:
+            step = spread @ np.linalg.solve(gain @ spread, change)
+        except np.linalg.LinAlgError:
+            return None
+        coef_new = work.coef.copy()
+        for (i, j), d in zip(entries, step, strict=True):
+            coef_new[i, columns[j]] += d
+        if not np.all(np.isfinite(coef_new)):
+            return None
+        work = IdentifiedModel(states=work.states, inputs=work.inputs, terms=work.terms, coef=coef_new,
+                               dt=work.dt)
+    return None
