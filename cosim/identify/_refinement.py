@@ -145,7 +145,17 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
     floor = _noise_floor(runs, meta) * noise_gain  # (decimated runs keep that share of the noise)
     tried: list[dict[str, Any]] = []
     fits: list[_Run] = []
-    seconds = 0.0
+
+    def refine(name: str, model: IdentifiedModel, support: np.ndarray, options: dict[str, Any]) -> None:
+        """One run of the multi-start: `model` refined from its coefficients, recorded in `fits` and `tried`."""
+        fit = refine_output_error(model, runs_oe, dt=dt, support=support,
+                                  estimate_x0=refine_initial_state and known_x0 is None, x0=known_x0,
+                                  coef_scale=coef_scale, **options)
+        stable = _is_stable(model, fit.coef, runs, dt) if prefer_stable else True
+        fits.append(_Run(fit, support, model, options, len(tried), stable))
+        tried.append({"start": name, "prior": options["prior"], "cost_start": fit.cost_start, "cost": fit.cost,
+                      "status": fit.status, "seconds": fit.seconds, "stable": stable})
+
     for (name, model), prior in order:
         best = _pick(fits, prefer_stable)
         if best is not None and best.fit.cost <= _FLOOR_MARGIN * floor and (best.stable or not prefer_stable):
@@ -153,17 +163,8 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
         model = model() if callable(model) else model
         if model is None:
             continue
-        support = _support(model, kin)
-        options = {"prior": prior, "continuation": True, "max_nfev": 60, **refine_options}
-        options["prior"] = prior
-        fit = refine_output_error(model, runs_oe, dt=dt, support=support,
-                                  estimate_x0=refine_initial_state and known_x0 is None, x0=known_x0,
-                                  coef_scale=coef_scale, **options)
-        seconds += fit.seconds
-        stable = _is_stable(model, fit.coef, runs, dt) if prefer_stable else True
-        fits.append(_Run(fit, support, model, options, len(tried), stable))
-        tried.append({"start": name, "prior": prior, "cost_start": fit.cost_start, "cost": fit.cost,
-                      "status": fit.status, "seconds": fit.seconds, "stable": stable})
+        refine(name, model, _support(model, kin),
+               {"prior": prior, "continuation": True, "max_nfev": 60, **refine_options} | {"prior": prior})
     best = _pick(fits, prefer_stable)
     if prefer_stable and best is not None and not best.stable:  # its unstable modes reflected, refined again
         from ._stability import stabilised
@@ -171,17 +172,11 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
         limit = 1.0 / (max(len(x) - 1 for x, _ in runs) * dt)
         coef = stabilised(best.model, best.fit.coef, best.support, limit, np.concatenate([x for x, _ in runs]))
         if coef is not None:
-            start = IdentifiedModel(states=best.model.states, inputs=best.model.inputs, terms=best.model.terms,
-                                    coef=coef, dt=dt)
-            fit = refine_output_error(start, runs_oe, dt=dt, support=best.support,
-                                      estimate_x0=refine_initial_state and known_x0 is None, x0=known_x0,
-                                      coef_scale=coef_scale, **best.options)
-            seconds += fit.seconds
-            stable = _is_stable(start, fit.coef, runs, dt)
-            fits.append(_Run(fit, best.support, start, best.options, len(tried), stable))
-            tried.append({"start": "stabilised", "prior": best.options["prior"], "cost_start": fit.cost_start,
-                          "cost": fit.cost, "status": fit.status, "seconds": fit.seconds, "stable": stable})
+            refine("stabilised", IdentifiedModel(states=best.model.states, inputs=best.model.inputs,
+                                                 terms=best.model.terms, coef=coef, dt=dt),
+                   best.support, best.options)
             best = _pick(fits, prefer_stable)
+    seconds = sum(run["seconds"] for run in tried)
     if best is None:  # pragma: no cover - there is always a start
         raise ValueError("no start to refine")
     fit, support, model, options, chosen = best.fit, best.support, best.model, best.options, best.index
