@@ -167,10 +167,10 @@ def _refine(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np.ndarray, 
                {"prior": prior, "continuation": True, "max_nfev": 60, **refine_options} | {"prior": prior})
     best = _pick(fits, prefer_stable)
     if prefer_stable and best is not None and not best.stable:  # its unstable modes reflected, refined again
-        from ._stability import stabilised
+        from ._stability import marginal_limit, stabilised
 
-        limit = 1.0 / (max(len(x) - 1 for x, _ in runs) * dt)
-        coef = stabilised(best.model, best.fit.coef, best.support, limit, np.concatenate([x for x, _ in runs]))
+        coef = stabilised(best.model, best.fit.coef, best.support, marginal_limit(runs, dt),
+                          np.concatenate([x for x, _ in runs]))
         if coef is not None:
             refine("stabilised", IdentifiedModel(states=best.model.states, inputs=best.model.inputs,
                                                  terms=best.model.terms, coef=coef, dt=dt),

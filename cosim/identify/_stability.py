@@ -54,6 +54,12 @@ def _unstable(model: IdentifiedModel, *, allow: bool, refined: bool) -> None:
     raise UnstableModelError(f"{message}: {remedies}", model=model, eigenvalues=eig)
 
 
+def marginal_limit(runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float) -> float:
+    """The fastest growth (1/s) a linear model's mode may have and count as marginal: at most e-fold over the
+    longest of the records `runs` (the data cannot tell it from an integrator)."""
+    return 1.0 / (max(len(x) - 1 for x, _ in runs) * dt)
+
+
 def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]],
                dt: float) -> dict[str, Any]:
     """The stability entries of the model's meta, judged over the longest of the records `runs`."""
@@ -63,8 +69,7 @@ def _stability(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarr
         a = model.linear_matrices()[0]
         eig = np.linalg.eigvals(a)
         worst = float(np.max(eig.real))
-        # a mode that grows at most e-fold over the record cannot be told from an integrator by this data
-        limit = 1.0 / span
+        limit = marginal_limit(runs, dt)
         out["eigenvalues"] = [[float(v.real), float(v.imag)] for v in eig]
         out["marginal_limit"] = limit
         out["stable"] = bool(worst <= limit)
@@ -89,7 +94,8 @@ def fastest_mode_hz(model: IdentifiedModel) -> float:
 def stabilised(model: IdentifiedModel, coef: np.ndarray, movable: np.ndarray, limit: float,
                states: np.ndarray, steps: int = 20) -> np.ndarray | None:
     """`coef` of a linear `model` with its modes that grow faster than `limit` (1/s) reflected into the left
-    half-plane, by least-change steps on the `movable` coefficients: None when it does not get there.
+    half-plane, by steps on the `movable` coefficients that cost the least equation error on `states`: None
+    when it does not get there.
 
     A start for the output-error refinement, not a fit: an unstable mode the data do not excite costs nothing in
     the free run, and its mirror image (the same speed, decaying) costs about as little, the way a subspace or
