@@ -302,7 +302,7 @@ def test_output_error_refinement_removes_the_noise_bias(clean):
 
 
 def test_output_error_refinement_of_a_nonlinear_model():
-    """A polynomial (state-input cross term) model is refined with RK4 simulations and finite differences."""
+    """A polynomial (state-input cross term) model is refined with RK4 simulations and their exact sensitivities."""
     model = IdentifiedModel(states=("x",), inputs=("u",), terms=("x", "x*u", "u"), coef=np.array([[-1.0, 0.5, 1.0]]))
     t = np.arange(600) * 0.02
     u = (np.sin(0.7 * t) + 0.5 * np.sign(np.sin(2.3 * t)))[:, None]

@@ -252,7 +252,8 @@ def _refine_decimated(starts: Sequence[tuple[str, Any]], runs: Sequence[tuple[np
                               estimate_x0=refine_initial_state and known_x0 is None,
                               x0=known_x0 if known_x0 is not None else [np.asarray(v) for v in meta["x0"]],
                               coef_scale=coef_scale, prior=0.0, continuation=False,
-                              max_nfev=int(refine_options.get("max_nfev", 60)))
+                              max_nfev=int(refine_options.get("max_nfev", 60)),
+                              exact_jacobian=bool(refine_options.get("exact_jacobian", True)))
     meta["refinement"].update(decimation=factor, analysis_dt=dt * factor, analysis_cost=meta["refinement"]["cost"],
                               cost=fit.cost, status=fit.status,
                               std_error=fit.std_error.tolist() if fit.std_error is not None else None)
@@ -359,7 +360,8 @@ def _prune(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]]
                                         estimate_x0=refine_initial_state and known_x0 is None,
                                         x0=known_x0 if known_x0 is not None else fit.x0,
                                         coef_scale=coef_scale, continuation=False,
-                                        max_nfev=int(refine_options.get("max_nfev", 60)))
+                                        max_nfev=int(refine_options.get("max_nfev", 60)),
+                                        exact_jacobian=bool(refine_options.get("exact_jacobian", True)))
             seconds += trial.seconds
             if trial.status == "ok" and bic(trial, new_support) <= bic(fit, support):
                 accepted = (trial, new_support, step)

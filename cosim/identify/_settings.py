@@ -124,10 +124,10 @@ def _check_settings(est: Any) -> None:
         raise InvalidSettingError(f"refine must be None or 'output_error', got {est.refine!r}")
     if not isinstance(est.refine_initial_state, bool):
         raise InvalidSettingError("refine_initial_state must be True or False")
-    extra = set(est.refine_options) - {"prior", "continuation", "max_nfev"}
+    extra = set(est.refine_options) - {"prior", "continuation", "max_nfev", "exact_jacobian"}
     if extra:
         raise InvalidSettingError(f"unknown refine_options {', '.join(sorted(extra))}; valid: prior, "
-                                  "continuation, max_nfev")
+                                  "continuation, max_nfev, exact_jacobian")
 
 
 #: The settings of ``SINDYc()`` (its ``repr`` shows the others).

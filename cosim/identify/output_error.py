@@ -297,7 +297,33 @@ class _Problem:
                 jacs.append((s / self.scale).transpose(0, 2, 1).reshape(-1, n_theta))
         return res, jacs
 
-    # -- residuals, nonlinear models (batched RK4, finite differences)
+    # -- residuals and Jacobian, nonlinear models (exact sensitivities by CasADi, :mod:`._sensitivity`)
+    def nonlinear_sensitivities(self, theta: np.ndarray, horizon: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Residuals and their Jacobian per record, as :meth:`linear_residuals` gives them (a diverging run:
+        residuals and Jacobian of NaN, which the solver's callers replace)."""
+        from ._sensitivity import free_run_sensitivities
+
+        coef, x0s = self.split(theta)
+        n, p, n_runs = self.n_x, self.n_coef, len(self.runs)
+        n_theta = p + (n * n_runs if self.estimate_x0 else 0)
+        res, jacs = [], []
+        for r, ((x, u), x0) in enumerate(zip(self.runs, x0s, strict=True)):
+            h = min(horizon, len(x) - 1)
+            run = free_run_sensitivities(self.model, coef, self.support, x0, u, self.dt, h)
+            if run is None:
+                res.append(np.full((h + 1) * n, np.nan))
+                jacs.append(np.full(((h + 1) * n, n_theta), np.nan))
+                continue
+            xs, sens = run
+            res.append(((xs - x[:h + 1]) / self.scale).ravel())
+            jac = np.zeros((h + 1, n, n_theta))
+            jac[:, :, :p] = sens[:, :, :p]
+            if self.estimate_x0:
+                jac[:, :, p + r * n:p + (r + 1) * n] = sens[:, :, p:]
+            jacs.append((jac / self.scale[None, :, None]).reshape(-1, n_theta))
+        return res, jacs
+
+    # -- residuals, nonlinear models (batched RK4, finite differences: the reference the tests compare with)
     def nonlinear_residuals(self, thetas: np.ndarray, horizon: int) -> list[np.ndarray]:
         """Residuals for a batch of parameter vectors, shape (n_batch, n_residuals)."""
         batch = thetas.shape[0]
@@ -397,7 +423,7 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
                         support: np.ndarray | None = None, estimate_x0: bool = True,
                         x0: Sequence[np.ndarray] | None = None, coef_scale: np.ndarray | None = None,
                         prior: float = 0.1, prior_anchor: np.ndarray | None = None, continuation: bool = True,
-                        max_nfev: int = 60, fd_step: float = 1e-6) -> OutputErrorFit:
+                        max_nfev: int = 60, fd_step: float = 1e-6, exact_jacobian: bool = True) -> OutputErrorFit:
     """Refine a model's non-zero coefficients (and initial states) by minimising its free-run error.
 
     Parameters
@@ -426,7 +452,11 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     max_nfev : int
         Function evaluations per stage.
     fd_step : float
-        Relative finite-difference step (nonlinear models only; linear models have an exact Jacobian).
+        Relative finite-difference step (nonlinear models with ``exact_jacobian=False`` only).
+    exact_jacobian : bool
+        Nonlinear models: the free run's exact sensitivities, stepped with it by CasADi
+        (:mod:`cosim.identify._sensitivity`), rather than forward differences (one more simulation per
+        parameter). Linear models always have an exact Jacobian.
 
     Returns
     -------
@@ -488,17 +518,24 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     theta = problem.theta0.copy()
     stages: list[dict[str, Any]] = []
     cache: dict[str, Any] = {}
+    exact = bool(exact_jacobian) and not problem.linear
 
     def residuals(t: np.ndarray, h: int) -> np.ndarray:
         if problem.linear:  # the Jacobian only when asked for: rejected trial steps need the residuals only
             res, _ = problem.linear_residuals(t, h, False)
             return _finite(np.concatenate(res))
+        if exact:  # the run with its sensitivities, kept for the Jacobian the solver asks for next
+            cache["key"], (res, jac) = (t.tobytes(), h), problem.nonlinear_sensitivities(t, h)
+            cache["jac"] = np.vstack(jac)
+            return _finite(np.concatenate(res))
         return _finite(np.concatenate([r[0] for r in problem.nonlinear_residuals(t[None], h)]))
 
     def jacobian(t: np.ndarray, h: int) -> np.ndarray:
-        if problem.linear:
+        if problem.linear or exact:
             if cache.get("key") != (t.tobytes(), h):
-                cache["key"], cache["jac"] = (t.tobytes(), h), np.vstack(problem.linear_residuals(t, h, True)[1])
+                cache["key"], cache["jac"] = (t.tobytes(), h), np.vstack(
+                    (problem.linear_residuals(t, h, True) if problem.linear
+                     else problem.nonlinear_sensitivities(t, h))[1])
             jac = cache["jac"]
             return np.where(np.isfinite(jac), jac, 0.0)
         steps = fd_step * np.maximum(np.abs(t), problem.x_scale)

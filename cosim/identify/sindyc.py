@@ -208,7 +208,8 @@ class SINDYc:
         With refinement, also estimate each record's initial state (recorded in ``meta["x0"]``).
     refine_options : mapping, optional
         Passed to :func:`cosim.identify.output_error.refine_output_error`: ``prior`` (default 0.1), ``continuation``
-        (default True), ``max_nfev`` (per stage, default 60).
+        (default True), ``max_nfev`` (per stage, default 60), ``exact_jacobian`` (default True: a nonlinear
+        model's exact sensitivities rather than forward differences).
     allow_unstable : bool
         Keep an unstable identified model with an :class:`IdentificationWarning` instead of raising
         :class:`~cosim.errors.UnstableModelError`.
