@@ -69,3 +69,24 @@ def test_an_effect_whose_model_still_predicts_no_better_than_the_mean_is_not_a_f
     message = _message([], {}, {}, SimpleNamespace(white=False), [rejected])  # (only its whiteness is read)
     assert "offset on constant lowered the held-out error, but the model with it still predicts held-out data " \
            "no better than their mean (NRMSE 180 %)" in message
+
+
+def test_the_held_out_initial_states_start_where_the_whole_data_fit_runs():
+    """Each fold's initial-state fits start, besides from the piece's first sample, from where the whole data's
+    fit of the model runs through it: two records of a mass on a spring, the model's own initial states."""
+    from cosim.diagnose._holdout import Folds
+
+    model = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("x", "v", "u"),
+                            coef=np.array([[0.0, 1.0, 0.0], [-4.0, -0.5, 1.0]]), dt=DT,
+                            meta={"x0": [[0.1, 0.0], [-0.2, 0.3]]})
+    u = np.sin(np.arange(800) * DT * 2.1)
+    runs = [model.simulate(x0, u[:399, None], dt=DT).states for x0 in model.meta["x0"]]
+    columns = {"x": np.concatenate([r[:, 0] for r in runs]), "v": np.concatenate([r[:, 1] for r in runs]),
+               "u": np.concatenate([u[:400], u[:400]])}
+    check = HeldOutCheck(columns, [0, 400], DT, {"x": 0.01, "v": 0.01}, estimate_x0=True)
+    first, second = check._guesses(model, columns, Folds.of(columns, [0, 400]))
+    np.testing.assert_allclose(first, model.meta["x0"], atol=1e-12)  # the records' starts: the fit's own
+    np.testing.assert_allclose(second, [runs[0][200], runs[1][200]], rtol=1e-9, atol=1e-12)  # the halves'
+    # without the whole data's initial states there is nothing to start from but the first samples
+    bare = IdentifiedModel(states=model.states, inputs=model.inputs, terms=model.terms, coef=model.coef, dt=DT)
+    assert check._guesses(bare, columns, Folds.of(columns, [0, 400])) is None

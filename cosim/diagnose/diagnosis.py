@@ -119,6 +119,9 @@ MIN_SIZE = 0.002
 VERIFY_TOP = 6
 #: Gauss-Newton iterations of a trial fit (the winner is then fitted to convergence).
 TRIAL_ITERATIONS = 4
+#: How many of a round's leading candidates may start from the base identified again with their terms
+#: (:func:`~cosim.diagnose._joint_start.identified_start`, a few seconds each) while none has paid off.
+IDENTIFIED_STARTS = 2
 #: How many significant trial fits of a round may be tried on held-out data, best first, before giving up.
 HELD_OUT_TRIES = 3
 #: Fewest samples of a record.
@@ -336,9 +339,11 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         # the score test is a first-order guide; the leading candidates are fitted for real and judged on
         # the actual drop of the output error (a large model error makes the first order unreliable)
         trials, realised = [], 0.0  # (the best BIC change realised so far: a second start must promise more)
-        for c in (c for c in ranking[:VERIFY_TOP] if c.significant):
+        for k, c in enumerate(c for c in ranking[:VERIFY_TOP] if c.significant):
+            # (the base identified again with the effect's terms, for the leading ones while none has paid)
             trials.append(trial_fit(current, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
-                                    names, TRIAL_ITERATIONS, band, realised=realised))
+                                    names, TRIAL_ITERATIONS, band, realised=realised,
+                                    identify_again=realised == 0.0 and k < IDENTIFIED_STARTS))
             if trials[-1] is not None and trials[-1].candidate.significant:
                 realised = min(realised, trials[-1].candidate.delta_bic)
         fitted.append(tuple(t.candidate for t in trials if t is not None))
