@@ -239,9 +239,8 @@ class HeldOutCheck:
             return None
         if run is None or not np.all(np.isfinite(run)):
             return None
-        starts = tuple(run[origins] for origins in folds.origins)
-        return (starts[0] if len(self.segments) > 1 else starts[0][0],
-                starts[1] if len(self.segments) > 1 else starts[1][0])
+        first, second = (run[origins] if len(self.segments) > 1 else run[origins[0]] for origins in folds.origins)
+        return first, second
 
     def judge(self, base: IdentifiedModel, fuller: IdentifiedModel, columns: Mapping[str, np.ndarray],
               min_gain: float | None = None) -> HeldOutEvidence:
