@@ -223,6 +223,7 @@ def test_records_with_different_steps(clean):
     ({"degree": 0}, "degree must be"),
     ({"refine_options": {"speed": 1}}, "unknown refine_options"),
     ({"prefer_stable": "yes"}, "prefer_stable must be True, False or None"),
+    ({"refine_options": {"stability_limit": -1.0}}, "stability_limit must be a positive number"),
 ])
 def test_bad_settings(kwargs, match):
     with pytest.raises(InvalidSettingError, match=match):

@@ -124,10 +124,14 @@ def _check_settings(est: Any) -> None:
         raise InvalidSettingError(f"refine must be None or 'output_error', got {est.refine!r}")
     if not isinstance(est.refine_initial_state, bool):
         raise InvalidSettingError("refine_initial_state must be True or False")
-    extra = set(est.refine_options) - {"prior", "continuation", "max_nfev", "exact_jacobian"}
+    extra = set(est.refine_options) - {"prior", "continuation", "max_nfev", "exact_jacobian", "stability_limit"}
     if extra:
         raise InvalidSettingError(f"unknown refine_options {', '.join(sorted(extra))}; valid: prior, "
-                                  "continuation, max_nfev, exact_jacobian")
+                                  "continuation, max_nfev, exact_jacobian, stability_limit")
+    limit = est.refine_options.get("stability_limit")
+    if limit is not None and not (isinstance(limit, (int, float)) and not isinstance(limit, bool)
+                                  and math.isfinite(limit) and limit > 0):
+        raise InvalidSettingError(f"refine_options stability_limit must be a positive number (1/s), got {limit!r}")
 
 
 #: The settings of ``SINDYc()`` (its ``repr`` shows the others).

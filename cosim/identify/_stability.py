@@ -31,6 +31,9 @@ from ..errors import IdentificationWarning, UnstableModelError
 from .model import IdentifiedModel
 
 #: What to try when an identified model is unstable (the end of the error's message).
+#: The cost the output-error refinement gives a diverging free run (residuals of 1e6 each): the scale of the
+#: stability penalty of a start whose own run overflows.
+_DIVERGED_COST = 1e12
 _REMEDIES = ("fix the kinematic rows (kinematics=, --kinematics), record longer or excite more, refine by output "
              "error (refine='output_error', --refine), or accept it with allow_unstable=True (--allow-unstable)")
 
@@ -146,3 +149,45 @@ def stabilised(model: IdentifiedModel, coef: np.ndarray, movable: np.ndarray, li
         work = IdentifiedModel(states=work.states, inputs=work.inputs, terms=work.terms, coef=coef_new,
                                dt=work.dt)
     return None
+
+
+class StabilityPenalty:
+    """Penalty rows that keep the linear part's eigenvalues in the closed left half-plane: one row per
+    eigenvalue, ``gain * max(Re(lambda), 0) / limit``, and its exact derivative (a simple eigenvalue moves by
+    ``w^H dA v / w^H v`` when A moves by dA).
+
+    `problem` is the output-error refinement's parameter layout (``split``, ``index``, ``model``). The gain
+    makes a growth of `limit` (1/s) cost `strength` times the data's cost at the stage's start (`data_cost` per
+    residual, `n_res` residuals), so the constrained optimum stays well inside ``Re(lambda) <= limit``. Written
+    by hand: scipy's ``least_squares`` takes bounds on parameters, not constraints on eigenvalues."""
+
+    def __init__(self, problem: Any, limit: float, data_cost: float, n_res: int, strength: float = 100.0):
+        self.problem, self.limit = problem, float(limit)
+        if not math.isfinite(data_cost):  # a start whose free run overflows: the cost of a diverging one
+            data_cost = _DIVERGED_COST
+        self.gain = math.sqrt(strength * max(data_cost, 1e-300) * n_res)
+        states = list(problem.model.states)
+        # the parameters that are entries of A: (parameter index, row, column)
+        self.entries = [(p, i, states.index(problem.model.terms[k])) for p, (i, k) in enumerate(problem.index)
+                        if problem.model.terms[k] in states]
+        self.columns = [problem.model.terms.index(s) if s in problem.model.terms else -1 for s in states]
+
+    def rows(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        coef, _ = self.problem.split(t)
+        n = len(self.columns)
+        a = np.zeros((n, n))
+        for j, k in enumerate(self.columns):
+            if k >= 0:
+                a[:, j] = coef[:, k]
+        jac = np.zeros((n, t.size))
+        if not np.all(np.isfinite(a)):
+            return np.zeros(n), jac
+        lam, left, right = linalg.eig(a, left=True, right=True)
+        value = np.maximum(lam.real, 0.0) * self.gain / self.limit
+        for m in np.flatnonzero(lam.real > 0.0):
+            norm = complex(left[:, m].conj() @ right[:, m])
+            if abs(norm) < 1e-12:  # a defective eigenvalue: no derivative to follow
+                continue
+            for p, i, j in self.entries:
+                jac[m, p] = (left[i, m].conj() * right[j, m] / norm).real * self.gain / self.limit
+        return value, jac

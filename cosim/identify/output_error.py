@@ -55,6 +55,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import DataError, InvalidSettingError
+from ._stability import StabilityPenalty
 from .model import DIVERGENCE_LIMIT, IdentifiedModel
 from .terms import FUNCTIONS, Term
 
@@ -397,33 +398,37 @@ def _first_horizon(model: IdentifiedModel, coef: np.ndarray, dt: float, n_max: i
 
 
 class _Stage:
-    """Residuals and Jacobian of one continuation stage: data on `horizon` samples, plus the prior rows."""
+    """Residuals and Jacobian of one continuation stage: data on `horizon` samples, plus the prior rows, plus
+    (with `stability`) the penalty rows of the linear part's growing modes."""
 
     def __init__(self, residuals, jacobian, horizon: int, weight: np.ndarray | None, anchor: np.ndarray,
-                 n_coef: int):
+                 n_coef: int, stability: StabilityPenalty | None = None):
         self.residuals, self.jacobian, self.horizon = residuals, jacobian, horizon
-        self.weight, self.anchor, self.n_coef = weight, anchor, n_coef
+        self.weight, self.anchor, self.n_coef, self.stability = weight, anchor, n_coef, stability
 
     def fun(self, t: np.ndarray) -> np.ndarray:
-        r = self.residuals(t, self.horizon)
-        if self.weight is None:
-            return r
-        return np.concatenate([r, self.weight * (t[:self.n_coef] - self.anchor)])
+        parts = [self.residuals(t, self.horizon)]
+        if self.weight is not None:
+            parts.append(self.weight * (t[:self.n_coef] - self.anchor))
+        if self.stability is not None:
+            parts.append(self.stability.rows(t)[0])
+        return np.concatenate(parts)
 
     def jac(self, t: np.ndarray) -> np.ndarray:
-        j = self.jacobian(t, self.horizon)
-        if self.weight is None:
-            return j
-        extra = np.zeros((self.n_coef, t.size))
-        extra[:, :self.n_coef] = np.diag(self.weight)
-        return np.vstack([j, extra])
+        parts = [self.jacobian(t, self.horizon)]
+        if self.weight is not None:
+            parts.append(np.hstack([np.diag(self.weight), np.zeros((self.n_coef, t.size - self.n_coef))]))
+        if self.stability is not None:
+            parts.append(self.stability.rows(t)[1])
+        return np.vstack(parts)
 
 
 def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]], *, dt: float,
                         support: np.ndarray | None = None, estimate_x0: bool = True,
                         x0: Sequence[np.ndarray] | None = None, coef_scale: np.ndarray | None = None,
                         prior: float = 0.1, prior_anchor: np.ndarray | None = None, continuation: bool = True,
-                        max_nfev: int = 60, fd_step: float = 1e-6, exact_jacobian: bool = True) -> OutputErrorFit:
+                        max_nfev: int = 60, fd_step: float = 1e-6, exact_jacobian: bool = True,
+                        stability_limit: float | None = None) -> OutputErrorFit:
     """Refine a model's non-zero coefficients (and initial states) by minimising its free-run error.
 
     Parameters
@@ -457,6 +462,10 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
         Nonlinear models: the free run's exact sensitivities, stepped with it by CasADi
         (:mod:`cosim.identify._sensitivity`), rather than forward differences (one more simulation per
         parameter). Linear models always have an exact Jacobian.
+    stability_limit : float, optional
+        Keep the linear part stable: each eigenvalue with a positive real part adds a penalty row to every
+        stage (:class:`~cosim.identify._stability.StabilityPenalty`); the fit ends well inside ``Re(lambda) <=
+        stability_limit`` (1/s), as MATLAB's ``ssest`` with ``EnforceStability``. None (default): unconstrained.
 
     Returns
     -------
@@ -550,8 +559,12 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     while True:
         last = horizon >= n_max
         weight = 0.0 if last else prior * (horizon + 1) * n_x * len(problem.runs)
+        penalty = None
+        if stability_limit is not None:
+            r0 = residuals(theta, horizon)
+            penalty = StabilityPenalty(problem, stability_limit, float(np.mean(r0 ** 2)), r0.size)
         stage = _Stage(residuals, jacobian, horizon, math.sqrt(weight) * problem.prior_weight if weight > 0 else None,
-                       anchor, problem.n_coef)
+                       anchor, problem.n_coef, penalty)
         n_res = stage.fun(theta).size
         method = "lm" if n_res >= theta.size else "trf"
         sol = least_squares(stage.fun, theta, jac=stage.jac, method=method, x_scale=problem.x_scale, xtol=1e-10,

@@ -209,13 +209,14 @@ class SINDYc:
     refine_options : mapping, optional
         Passed to :func:`cosim.identify.output_error.refine_output_error`: ``prior`` (default 0.1), ``continuation``
         (default True), ``max_nfev`` (per stage, default 60), ``exact_jacobian`` (default True: a nonlinear
-        model's exact sensitivities rather than forward differences).
+        model's exact sensitivities), ``stability_limit`` (1/s: every refinement kept below that growth).
     allow_unstable : bool
         Keep an unstable identified model with an :class:`IdentificationWarning` instead of raising
         :class:`~cosim.errors.UnstableModelError`.
     prefer_stable : bool, optional
         With refinement, a stable refinement of the multi-start wins over an unstable one that costs less by up
-        to a factor 2. Default: when unstable models are refused (``not allow_unstable``).
+        to a factor 2; if all are unstable, one more from the best with its unstable modes reflected, kept stable.
+        Default: when unstable models are refused (``not allow_unstable``).
     decimate : "auto" or int
         With refinement, the multi-start runs on the records decimated by this factor
         (:func:`~cosim.data.decimation.decimate`), and its winner is refined once more on the records as given.
