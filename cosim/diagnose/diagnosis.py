@@ -76,6 +76,7 @@ from ..identify.model import IdentifiedModel
 from ._analysis_rate import analysis_factor, at_record_rate
 from ._holdout import LATER_GAIN, REBASED_GAIN, HeldOutCheck
 from ._ranking import _round, check_effect_selection, record_band
+from ._stable_final import stable_if_free
 from ._starts import _bounded_first, trial_fit
 from ._trials import (
     _base_offset,
@@ -419,7 +420,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         before = _figures_of(without, truth, res_before, None, refitted=without)
     first = given[0]
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
-    final = current
+    final = stable_if_free(current, columns, starts, first.dt) if accepted else current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
     after = _figures_of(final, [_with_columns(r, _record_columns(columns, starts, k, r)) for k, r in
                                 enumerate(truth)], res_after, None, refitted=final) if accepted else before
