@@ -25,6 +25,7 @@ from ..errors import DataError, InvalidSettingError
 from ..identify._stability import marginal_limit
 from ..identify.model import IdentifiedModel
 from ..identify.output_error import refine_output_error
+from ._free_run import _bounds, _matrices
 
 #: The most the stable refit may cost, over the unconstrained one, to replace the model.
 STABLE_COST_RATIO = 1.05
@@ -35,11 +36,8 @@ def _runs(model: IdentifiedModel, columns: Mapping[str, np.ndarray],
     """Each record's (states, inputs) from the concatenated `columns` (None when a signal is missing)."""
     if not all(name in columns for name in (*model.states, *model.inputs)):
         return None
-    x = np.column_stack([np.asarray(columns[s], dtype=float) for s in model.states])
-    u = np.column_stack([np.asarray(columns[s], dtype=float) for s in model.inputs]) if model.inputs else \
-        np.zeros((len(x), 0))
-    bounds = [*(int(a) for a in starts), len(x)] if len(starts) else [0, len(x)]
-    return [(x[a:b], u[a:b]) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a >= 3]
+    x, u = _matrices(model, columns)
+    return [(x[a:b], u[a:b]) for a, b in _bounds([int(a) for a in starts], len(x))]
 
 
 def _grows(model: IdentifiedModel, limit: float) -> bool:
