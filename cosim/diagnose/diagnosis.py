@@ -412,6 +412,11 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                                                                  given[0].dt, given_fit, factor)
             _write_back(accepted, owners, nuisances)
             given_columns = {**given_columns, **added}
+            # (the refit moves a delay's taps: its centroid may leave the plausible range there too)
+            current, accepted, owners, nuisances, implausible = _drop_implausible(
+                current, accepted, owners, nuisances, given_columns, given[0].dt, given_fit)
+            rejected += implausible
+            _write_back(accepted, owners, nuisances)
         if without is not None:  # (refitted there too: before and after are then alike)
             without = at_record_rate(without, [], [], given_columns, given[0].dt, given_fit, factor)[0]
         columns, starts = given_columns, given_starts
