@@ -44,9 +44,9 @@ def test_a_stable_model_is_left_alone():
 
 
 def test_the_kinematic_rows_stay_pinned():
-    """p' = v is exact in the physically structured model: the stable refit moves the dynamic rows only (it
-    once refitted the kinematic row's 1 as well, to 0.98 on a benchmark record, and the diagnosis then found
-    no velocity to attach friction to)."""
+    """p' = v is exact in the physically structured model: the stable refit moves the dynamic rows only. It once
+    refitted the kinematic row's 1 as well (0.98 when applied to benchmark record 165's base), and a row that is
+    no longer exactly ``p' = v`` is no kinematic row to the effects' roles (``Roles.of``)."""
     dt, n = 0.01, 800
     t = dt * np.arange(n + 1)
     u = np.sign(np.sin(2 * np.pi * 0.7 * t))
