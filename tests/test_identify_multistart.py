@@ -264,10 +264,11 @@ def test_a_stable_refinement_is_preferred_to_an_unexcited_unstable_one(tmp_path)
 
 @pytest.mark.slow
 def test_prefer_stable_keeps_an_unstable_model_allowed_but_not_preferred():
-    """Record 112 of benchmarks/independent_plants.py (a two-mass drive with a Coulomb friction on the load), with
-    unstable models allowed: the least-cost refinement is unstable; with ``prefer_stable=True`` a stable one of at
-    most twice its cost is the answer, and nothing is refused either way."""
-    record = _benchmark_record(112)
+    """Record 129 of benchmarks/independent_plants.py (a linear two-mass drive in closed loop), with unstable models
+    allowed: the least-cost refinement is unstable; with ``prefer_stable=True`` a stable one of at most twice its
+    cost is the answer, and nothing is refused either way. (Record 112, used before, identifies stable since
+    the multi-start no longer stops 1.5 times above the noise floor.)"""
+    record = _benchmark_record(129)
     states, u = list(record.cli["states"]), record.cli["input"]
     assert not record.cli["derive"]  # (every state measured)
     traj = Trajectory.from_arrays(record.train["time"], {k: record.train[k] for k in [*states, u]},
@@ -375,3 +376,29 @@ def test_the_reflected_start_is_kept_stable_while_it_is_refined(tmp_path):
     assert min(r["cost"] for r in runs if r["start"] == "stabilised") <= 2.0 * min(r["cost"] for r in runs)
     limit = meta["marginal_limit"]
     assert max(re for re, _ in meta["eigenvalues"]) <= limit
+
+
+@pytest.mark.slow
+def test_the_multi_start_goes_on_past_a_refinement_a_quarter_above_the_noise_floor():
+    """Record 196 of benchmarks/independent_plants.py (a two-mass drive under steps, a dead zone on the torque),
+    with the diagnosis' base settings: the first start's refinement ends 1.27 times the white-noise floor,
+    unstable (+1.06 1/s); the velocity-integral start reaches 0.99 times it, stable. The multi-start used to
+    stop at 1.5 times the floor, with the first."""
+    from cosim.diagnose.diagnosis import BASE_SETTINGS
+    from cosim.identify._refinement import _FLOOR_MARGIN
+
+    record = _benchmark_record(196, version=3)
+    states, u = list(record.cli["states"]), record.cli["input"]
+    traj = Trajectory.from_arrays(record.train["time"], {k: record.train[k] for k in [*states, u]},
+                                  roles={**dict.fromkeys(states, "state"), u: "input"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = SINDYc(**BASE_SETTINGS).fit(traj, states=states, inputs=[u]).model_
+    multistart = model.meta["multistart"]
+    floor, runs = multistart["noise_floor"], multistart["runs"]
+    assert runs[0]["cost"] > 1.2 * floor  # (below 1.5: the old margin stopped here)
+    chosen = next(r for r in runs if (r["start"], r["prior"]) == (multistart["chosen"]["start"],
+                                                                  multistart["chosen"]["prior"]))
+    assert chosen["cost"] == min(r["cost"] for r in runs) <= _FLOOR_MARGIN * floor
+    assert chosen["cost"] < 0.85 * runs[0]["cost"]
+    assert model.meta["stable"] is True
