@@ -129,3 +129,24 @@ def test_a_cogging_its_position_never_turns_two_periods_of_is_drawn_again():
     many = {**few, "params": {**few["params"], "periods": 30.0 / travel}}
     assert "periods" in ip._not_shown(run, few)
     assert ip._not_shown(run, many) is None
+
+
+def test_the_oracle_base_is_the_record_plant_without_its_effects(record):
+    """benchmarks/bench_diagnosis_oracle.py gives the diagnosis the simulator's own linear plant as a cosim model:
+    simulated by cosim on the record's input, it follows the simulator's run without the effect."""
+    import bench_diagnosis_oracle as oracle
+
+    from cosim.identify.model import IdentifiedModel
+
+    spec = record.spec
+    plant = ip.Plant(spec["plant"]["kind"], {k: v for k, v in spec["plant"].items() if k != "kind"})
+    m = oracle.linear_plant(spec, record.cli)
+    model = IdentifiedModel(states=tuple(m["states"]), inputs=tuple(m["inputs"]), terms=tuple(m["terms"]),
+                            coef=np.array(m["coef"]), dt=m["dt"])
+    assert model.is_linear and len(model.states) == len(plant.states)
+    u = record.train[plant.input][:-1]
+    without, _ = ip.simulate(plant, [], spec["dt"], len(u), u=u)
+    sim = model.simulate(without[0], u[:, None], dt=spec["dt"])
+    assert sim.ok
+    for i in range(len(plant.states)):
+        assert np.max(np.abs(sim.states[:, i] - without[:, i])) < 1e-3 * np.ptp(without[:, i])

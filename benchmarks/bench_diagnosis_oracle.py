@@ -1,0 +1,146 @@
+"""How much of the generalisation benchmark's gap is the base model? The diagnosis from the plant's own linear part.
+
+The records and scoring of ``bench_diagnosis_generalization.py``, and one more path:
+
+(o) ``cosim diagnose DATA.csv --state S --input U [--derive POS] --model model_oracle.json --json -o ..``
+
+where ``model_oracle.json`` is the simulator's own linear plant (``benchmarks/independent_plants.py``: its masses,
+shaft, dampers and spring, no effect) as a cosim model: the base no identification can beat, which no user has.
+Where the default diagnosis names the right effect no more often from it than from its own identified base, what
+limits the benchmark is not the identification but what the records show (an effect's non-linear part beside
+the noise) and the diagnosis' acceptance rules. Its held-out figures take the oracle model as the model before.
+
+Results go to benchmarks/results/diagnosis_oracle.json and .md (with path (a) run beside it for comparison).
+
+Run:  python benchmarks/bench_diagnosis_oracle.py [--slice 0:200] [--jobs 2] [--data DIR] [--paths o,a]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_diagnosis_generalization as gen  # noqa: E402
+import independent_plants as ip  # noqa: E402
+
+ORACLE = "model_oracle.json"
+
+
+def linear_plant(spec: dict, cli: dict) -> dict[str, Any]:
+    """The simulator's linear plant (no effect) as cosim's model file: kinematic rows ``p' = v``, the velocity rows
+    from the masses, the shaft and the dampers (`cli` names the states as the record's CLI does)."""
+    p, states, u = spec["plant"], list(cli["states"]), cli["input"]
+    if p["kind"] == "single":
+        x, v = states
+        rows = {x: {v: 1.0}, v: {x: -p["k"] / p["m"], v: -p["b"] / p["m"], u: 1.0 / p["m"]}}
+    else:
+        tm, wm, tl, wl = states
+        jm, jl, k, c = p["Jm"], p["JL"], p["k"], p["c"]
+        rows = {tm: {wm: 1.0}, tl: {wl: 1.0},
+                wm: {tm: -k / jm, tl: k / jm, wm: -(c + p["bm"]) / jm, wl: c / jm, u: 1.0 / jm},
+                wl: {tm: k / jl, tl: -k / jl, wl: -(c + p["bL"]) / jl, wm: c / jl}}
+    terms = [*states, u]
+    return {"states": states, "inputs": [u], "terms": terms,
+            "coef": [[rows[s].get(t, 0.0) for t in terms] for s in states], "dt": spec["dt"]}
+
+
+def _write_oracle(folder: Path) -> Path:
+    from cosim.identify.model import IdentifiedModel
+
+    truth = json.loads((folder / "truth.json").read_text())
+    plant = linear_plant(truth["spec"], truth["cli"])
+    path = folder / ORACLE
+    IdentifiedModel(states=tuple(plant["states"]), inputs=tuple(plant["inputs"]), terms=tuple(plant["terms"]),
+                    coef=np.array(plant["coef"]), dt=plant["dt"]).save(path)
+    return path
+
+
+def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
+    """The generalisation benchmark's command lines, and path (o)'s (its model file written here)."""
+    cmds = _commands(folder, cli, cosim)
+    oracle = _write_oracle(folder)
+    diagnose = list(cmds["b"][-1])
+    diagnose[diagnose.index("--model") + 1] = str(oracle)
+    diagnose[diagnose.index("-o") + 1] = str(folder / "model_after_o.json")
+    return {**cmds, "o": [diagnose]}
+
+
+def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
+    """Path (o)'s held-out figures against the oracle model; the other paths' as the benchmark measures them."""
+    if path != "o":
+        return _heldout_figures(path, named, folder, spec, cli)
+    before_model = folder / ORACLE
+    if "offset" in named:
+        before_model = gen._without_constant(before_model, folder, cli)
+    b = gen.heldout_nrmse(before_model, folder, spec, cli)
+    a = gen.heldout_nrmse(folder / "model_after_o.json", folder, spec, cli)
+    return {"heldout_before_pct": b, "heldout_after_pct": a,
+            "heldout_worse": bool(math.isfinite(b) and a > b * (1 + gen.WORSE_TOLERANCE))}
+
+
+_commands, _heldout_figures = gen.commands, gen.heldout_figures
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The per-effect table of each path, and the records only one of (o) and (a) names right first."""
+    titles = {"o": "(o) the plant's own linear part given as `--model`", "a": "(a) the default path (identifies first)"}
+    lines = ["# Diagnosis from the plant's own linear part (an oracle base)", "",
+             f"Records {result['slice']} of the generalisation benchmark (at most {result['max_samples']} samples, "
+             f"generator version {ip.GENERATOR_VERSION}); {result['jobs']} jobs; {result['wall_s']:.0f} s.", ""]
+    for path in result["summary"]:
+        s = result["summary"][path]
+        lines += [f"## {titles.get(path, path)}", "",
+                  "| effect | records | named right first % | false claims % | accepted, worse held-out |",
+                  "| --- | --- | --- | --- | --- |"]
+        for name, f in [*s["per_effect"].items(), ("**overall**", s["overall"])]:
+            lines.append(f"| {name} | {f['records']} | {f['right_first_pct']:.1f} | {f['false_claims_pct']:.1f} "
+                         f"| {f['accepted_worse_heldout']} |")
+        lines.append("")
+    if {"o", "a"} <= set(result["summary"]):
+        rows = result["rows"]
+        only = {p: [r["index"] for r in rows if r.get(p, {}).get("right_first")
+                    and not r.get("a" if p == "o" else "o", {}).get("right_first")] for p in ("o", "a")}
+        either = sum(bool(r.get("o", {}).get("right_first") or r.get("a", {}).get("right_first")) for r in rows)
+        lines += [f"Named right first from the oracle base only: {', '.join(map(str, only['o'])) or 'none'}; "
+                  f"from the identified base only: {', '.join(map(str, only['a'])) or 'none'}. By either: "
+                  f"{either} of {len(rows)} ({100.0 * either / max(len(rows), 1):.1f} %).", ""]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--slice", default="0:200", help="'A:B' or 'i,j,k'")
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--out", default=str(gen.RESULTS), help="results folder")
+    parser.add_argument("--data", default=None,
+                        help="where records are generated and kept (default $TMPDIR/cosim-diagnosis-records)")
+    parser.add_argument("--max-samples", type=int, default=ip.DEFAULT_MAX_SAMPLES)
+    parser.add_argument("--paths", default="o,a")
+    parser.add_argument("--timeout", type=float, default=600.0, help="per CLI call, s")
+    parser.add_argument("--cosim", default=shutil.which("cosim", path=str(Path(sys.executable).parent)) or "cosim")
+    args = parser.parse_args()
+    gen.commands, gen.heldout_figures = commands, heldout_figures  # (the workers are forked: they see these too)
+    data = Path(args.data) if args.data else Path(os.environ.get("TMPDIR", "/tmp")) / "cosim-diagnosis-records"
+    result = gen.run(gen._parse_slice(args.slice, 200), out=Path(args.out) / "diagnosis_oracle", data_dir=data,
+                     max_samples=args.max_samples, paths=tuple(p.strip() for p in args.paths.split(",")),
+                     cosim=args.cosim, jobs=args.jobs, timeout=args.timeout, write=False)
+    out = Path(args.out) / "diagnosis_oracle"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    for suffix, text in ((".json", json.dumps(result, indent=1, default=float) + "\n"), (".md", markdown(result))):
+        tmp = out.with_suffix(suffix + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(out.with_suffix(suffix))
+    print(markdown(result))
+
+
+if __name__ == "__main__":
+    main()
