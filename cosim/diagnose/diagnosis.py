@@ -479,8 +479,9 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
     of a period) is screened against a model whose constant has already taken that mean: what is left of it
     may fall below the size floor while the constant then passes as an ``offset``. So before an offset is
     named, the catalogue is screened and the leading candidates fitted on the model without the constant
-    (`offset`'s third item); the best that beats the model with the offset by BIC (on the actual costs) and
-    passes the held-out check is named instead.
+    (`offset`'s third item); the best (ordered as the rounds order, gravity before a softening spring it ties
+    with) that beats the model with the offset by BIC (on the actual costs) and passes the held-out check is
+    named instead.
     """
     cand, with_offset, reduced = offset
     try:
@@ -500,8 +501,8 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
                      taken=[(c.name, c.attached_to) for c in accepted])
     trials = [_fit_with(reduced, c, columns, dt, nuisances, screen, alpha, bic_margin, min_size, fit,
                         iterations=TRIAL_ITERATIONS) for c in ranking[:VERIFY_TOP] if c.significant]
-    trials = sorted((t for t in trials if t is not None and t.candidate.significant),
-                    key=lambda t: t.candidate.delta_bic)
+    trials = _bounded_first(sorted((t for t in trials if t is not None and t.candidate.significant),
+                                   key=lambda t: t.candidate.delta_bic), screen.n_obs)
     for trial in trials[:HELD_OUT_TRIES]:
         trial = _fit_with(reduced, trial.candidate, columns, dt, nuisances, screen, alpha, bic_margin, min_size,
                           fit) or trial
