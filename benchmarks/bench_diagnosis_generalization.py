@@ -552,9 +552,10 @@ def rescore(path: Path, data_dir: Path, out: Path, offset_heldout: tuple[str, ..
     return result
 
 
-def _write(result: dict[str, Any], out: Path) -> None:
+def _write(result: dict[str, Any], out: Path, render=None) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
-    for suffix, text in ((".json", json.dumps(result, indent=1, default=float) + "\n"), (".md", markdown(result))):
+    md = (render or markdown)(result)
+    for suffix, text in ((".json", json.dumps(result, indent=1, default=float) + "\n"), (".md", md)):
         tmp = out.with_suffix(suffix + ".tmp")
         tmp.write_text(text)
         tmp.replace(out.with_suffix(suffix))

@@ -133,12 +133,7 @@ def main() -> None:
     result = gen.run(gen._parse_slice(args.slice, 200), out=Path(args.out) / "diagnosis_oracle", data_dir=data,
                      max_samples=args.max_samples, paths=tuple(p.strip() for p in args.paths.split(",")),
                      cosim=args.cosim, jobs=args.jobs, timeout=args.timeout, write=False)
-    out = Path(args.out) / "diagnosis_oracle"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    for suffix, text in ((".json", json.dumps(result, indent=1, default=float) + "\n"), (".md", markdown(result))):
-        tmp = out.with_suffix(suffix + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(out.with_suffix(suffix))
+    gen._write(result, Path(args.out) / "diagnosis_oracle", markdown)
     print(markdown(result))
 
 
