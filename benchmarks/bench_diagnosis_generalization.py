@@ -561,18 +561,23 @@ def _write(result: dict[str, Any], out: Path, render=None) -> None:
         tmp.replace(out.with_suffix(suffix))
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, default=200, help="records 0..n-1")
-    parser.add_argument("--slice", default=None, help="a subset: 'A:B' or 'i,j,k'")
+def add_run_arguments(parser: argparse.ArgumentParser, paths: str) -> None:
+    """The options of a run over records (jobs, folders, record length, paths, time-out, the cosim to run)."""
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--out", default=str(RESULTS), help="results folder")
     parser.add_argument("--data", default=None,
                         help="where records are generated and kept (default $TMPDIR/cosim-diagnosis-records)")
     parser.add_argument("--max-samples", type=int, default=ip.DEFAULT_MAX_SAMPLES)
-    parser.add_argument("--paths", default="a,b")
+    parser.add_argument("--paths", default=paths)
     parser.add_argument("--timeout", type=float, default=600.0, help="per CLI call, s")
     parser.add_argument("--cosim", default=shutil.which("cosim", path=str(Path(sys.executable).parent)) or "cosim")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=200, help="records 0..n-1")
+    parser.add_argument("--slice", default=None, help="a subset: 'A:B' or 'i,j,k'")
+    add_run_arguments(parser, paths="a,b")
     parser.add_argument("--offset-heldout", default="", metavar="PATHS",
                         help="with --rescore: measure the held-out figures of offset findings again for these paths "
                              "(e.g. 'a'; the records' model_after files must be from that result's run)")

@@ -21,7 +21,6 @@ import argparse
 import json
 import math
 import os
-import shutil
 import sys
 from pathlib import Path
 from typing import Any
@@ -119,14 +118,7 @@ def markdown(result: dict[str, Any]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slice", default="0:200", help="'A:B' or 'i,j,k'")
-    parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--out", default=str(gen.RESULTS), help="results folder")
-    parser.add_argument("--data", default=None,
-                        help="where records are generated and kept (default $TMPDIR/cosim-diagnosis-records)")
-    parser.add_argument("--max-samples", type=int, default=ip.DEFAULT_MAX_SAMPLES)
-    parser.add_argument("--paths", default="o,a")
-    parser.add_argument("--timeout", type=float, default=600.0, help="per CLI call, s")
-    parser.add_argument("--cosim", default=shutil.which("cosim", path=str(Path(sys.executable).parent)) or "cosim")
+    gen.add_run_arguments(parser, paths="o,a")
     args = parser.parse_args()
     gen.commands, gen.heldout_figures = commands, heldout_figures  # (the workers are forked: they see these too)
     data = Path(args.data) if args.data else Path(os.environ.get("TMPDIR", "/tmp")) / "cosim-diagnosis-records"
