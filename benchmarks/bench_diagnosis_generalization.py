@@ -348,10 +348,10 @@ def run_record(index: int, data_dir: str, max_samples: int, paths: tuple[str, ..
     return row
 
 
-def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
-    """The held-out NRMSE % before and after a path's findings (its model after, as written in `folder`), and
-    whether they made it worse."""
-    before_model = folder / "model.json" if path == "b" else _model_before_a(folder, cli)
+def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict, before: Any = None) -> dict:
+    """The held-out NRMSE % before and after a path's findings (its model after, as written in `folder`; the model
+    before: `before`, or the path's own), and whether they made it worse."""
+    before_model = before or (folder / "model.json" if path == "b" else _model_before_a(folder, cli))
     if "offset" in named:  # against the model without the constant
         before_model = _without_constant(before_model, folder, cli)
     b = heldout_nrmse(before_model, folder, spec, cli)

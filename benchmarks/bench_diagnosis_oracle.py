@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from pathlib import Path
@@ -34,9 +33,11 @@ import independent_plants as ip  # noqa: E402
 ORACLE = "model_oracle.json"
 
 
-def linear_plant(spec: dict, cli: dict) -> dict[str, Any]:
-    """The simulator's linear plant (no effect) as cosim's model file: kinematic rows ``p' = v``, the velocity rows
-    from the masses, the shaft and the dampers (`cli` names the states as the record's CLI does)."""
+def linear_plant(spec: dict, cli: dict):
+    """The simulator's linear plant (no effect) as a cosim model: kinematic rows ``p' = v``, the velocity rows from
+    the masses, the shaft and the dampers (`cli` names the states as the record's CLI does)."""
+    from cosim.identify.model import IdentifiedModel
+
     p, states, u = spec["plant"], list(cli["states"]), cli["input"]
     if p["kind"] == "single":
         x, v = states
@@ -47,20 +48,14 @@ def linear_plant(spec: dict, cli: dict) -> dict[str, Any]:
         rows = {tm: {wm: 1.0}, tl: {wl: 1.0},
                 wm: {tm: -k / jm, tl: k / jm, wm: -(c + p["bm"]) / jm, wl: c / jm, u: 1.0 / jm},
                 wl: {tm: k / jl, tl: -k / jl, wl: -(c + p["bL"]) / jl, wm: c / jl}}
-    terms = [*states, u]
-    return {"states": states, "inputs": [u], "terms": terms,
-            "coef": [[rows[s].get(t, 0.0) for t in terms] for s in states], "dt": spec["dt"]}
+    terms = (*states, u)
+    return IdentifiedModel(states=tuple(states), inputs=(u,), terms=terms,
+                           coef=np.array([[rows[s].get(t, 0.0) for t in terms] for s in states]), dt=spec["dt"])
 
 
 def _write_oracle(folder: Path) -> Path:
-    from cosim.identify.model import IdentifiedModel
-
     truth = json.loads((folder / "truth.json").read_text())
-    plant = linear_plant(truth["spec"], truth["cli"])
-    path = folder / ORACLE
-    IdentifiedModel(states=tuple(plant["states"]), inputs=tuple(plant["inputs"]), terms=tuple(plant["terms"]),
-                    coef=np.array(plant["coef"]), dt=plant["dt"]).save(path)
-    return path
+    return linear_plant(truth["spec"], truth["cli"]).save(folder / ORACLE)
 
 
 def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
@@ -74,16 +69,8 @@ def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
 
 
 def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
-    """Path (o)'s held-out figures against the oracle model; the other paths' as the benchmark measures them."""
-    if path != "o":
-        return _heldout_figures(path, named, folder, spec, cli)
-    before_model = folder / ORACLE
-    if "offset" in named:
-        before_model = gen._without_constant(before_model, folder, cli)
-    b = gen.heldout_nrmse(before_model, folder, spec, cli)
-    a = gen.heldout_nrmse(folder / "model_after_o.json", folder, spec, cli)
-    return {"heldout_before_pct": b, "heldout_after_pct": a,
-            "heldout_worse": bool(math.isfinite(b) and a > b * (1 + gen.WORSE_TOLERANCE))}
+    """The benchmark's held-out figures; path (o)'s against the oracle model as the model before."""
+    return _heldout_figures(path, named, folder, spec, cli, folder / ORACLE if path == "o" else None)
 
 
 _commands, _heldout_figures = gen.commands, gen.heldout_figures

@@ -136,13 +136,9 @@ def test_the_oracle_base_is_the_record_plant_without_its_effects(record):
     simulated by cosim on the record's input, it follows the simulator's run without the effect."""
     import bench_diagnosis_oracle as oracle
 
-    from cosim.identify.model import IdentifiedModel
-
     spec = record.spec
     plant = ip.Plant(spec["plant"]["kind"], {k: v for k, v in spec["plant"].items() if k != "kind"})
-    m = oracle.linear_plant(spec, record.cli)
-    model = IdentifiedModel(states=tuple(m["states"]), inputs=tuple(m["inputs"]), terms=tuple(m["terms"]),
-                            coef=np.array(m["coef"]), dt=m["dt"])
+    model = oracle.linear_plant(spec, record.cli)
     assert model.is_linear and len(model.states) == len(plant.states)
     u = record.train[plant.input][:-1]
     without, _ = ip.simulate(plant, [], spec["dt"], len(u), u=u)
