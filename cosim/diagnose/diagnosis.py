@@ -384,8 +384,9 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     bar.close()
     _set_gain(check, accepted)
     without = None  # the model without the base's constant, when an offset is all that is found
-    if "offset" in names and len(accepted) < max_effects:
-        # the base's own constant, judged as an effect once the rounds are over (see _base_offset)
+    if len(accepted) < max_effects:
+        # the base's own constant, judged as an effect once the rounds are over (see _base_offset); a force with
+        # a mean it stood in for is looked for also when the offset itself is not asked for (`effects`)
         offset = _base_offset(current, columns, dt, nuisances, alpha, bic_margin, min_size, fit, check)
         rival = _offset_rival(offset, names, accepted, columns, dt, nuisances, alpha, bic_margin, min_size, fit,
                               check) if offset is not None else None
@@ -397,10 +398,12 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             columns.update(rival.new_columns)
             _write_back(accepted, owners, nuisances)
             steps.append((tuple(c.name for c in accepted), current))
-            # and the constant, judged again beside it (a record can have both)
+            # and the constant, judged again beside it (a record can have both; not named unless asked for)
             offset = _base_offset(_with_constant(current, offset[0].rows, columns, dt, nuisances, fit), columns,
                                   dt, nuisances, alpha, bic_margin, min_size, fit, check)
-        if offset is not None:
+            if offset is not None and "offset" not in names:
+                current = offset[1]
+        if offset is not None and "offset" in names:
             accepted.append(offset[0])
             current = offset[1]
             steps.append((tuple(c.name for c in accepted), current))
