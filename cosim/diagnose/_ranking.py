@@ -186,6 +186,7 @@ def _round(screen: OutputErrorScreen, names: Sequence[str] | EffectSelection, al
             else:
                 values = effect.grid(attachment, data, band)
             for cand in _scores(screen, effect, attachment, values, alpha, bic_margin, min_size):
+                cand = replace(cand, fixed=fixed is not None)
                 if effect.integer and fixed is None and len(values) >= 3 and cand.nuisance == values[-1]:
                     # at the top of the band: the truth may lie beyond it, and this value only stands in
                     cand = replace(cand, significant=False, explained={**cand.explained, "at_edge": 1.0})

@@ -215,7 +215,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
             iterations = max(iterations, TIED_ITERATIONS)
     nuis = list(nuisances)
     own = None
-    if effect.nuisance is not None and not effect.integer and effect.fit_nuisance:
+    if effect.nuisance is not None and not effect.integer and effect.fit_nuisance and not cand.fixed:
         own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance), tied_to=tie)
         nuis.append(own)
     try:

@@ -56,6 +56,9 @@ class EffectCandidate:
         The effect's coefficients in its rows' equations, row by row (the score test's estimate).
     nuisance_se : float or None
         Standard error of the nuisance parameter when the trial fit estimated it.
+    fixed : bool
+        The nuisance value was given in the effect selection (``"deadzone:width=0.2"``): tried at that value
+        only, never refitted.
     """
 
     name: str
@@ -72,6 +75,7 @@ class EffectCandidate:
     meaning: str = ""
     coefficients: tuple[float, ...] = ()
     nuisance_se: float | None = None
+    fixed: bool = False
 
     @property
     def placement(self) -> Attachment:
