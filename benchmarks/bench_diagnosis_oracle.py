@@ -1,6 +1,7 @@
-"""How much of the generalisation benchmark's gap is the base model? The diagnosis from the plant's own linear part.
+"""How much of the generalisation benchmark's gap is the base model, and how much the search? The diagnosis from
+the plant's own linear part, and told which effect to look for.
 
-The records and scoring of ``bench_diagnosis_generalization.py``, and one more path:
+The records and scoring of ``bench_diagnosis_generalization.py``, and two more paths:
 
 (o) ``cosim diagnose DATA.csv --state S --input U [--derive POS] --model model_oracle.json --json -o ..``
 
@@ -10,9 +11,17 @@ Where the default diagnosis names the right effect no more often from it than fr
 limits the benchmark is not the identification but what the records show (an effect's non-linear part beside
 the noise) and the diagnosis' acceptance rules. Its held-out figures take the oracle model as the model before.
 
-Results go to benchmarks/results/diagnosis_oracle.json and .md (with path (a) run beside it for comparison).
+(e) ``cosim diagnose DATA.csv --state S --input U [--derive POS] --effects ITEMS --json -o ..``
 
-Run:  python benchmarks/bench_diagnosis_oracle.py [--slice 0:200] [--jobs 2] [--data DIR] [--paths o,a]
+the default path told the record's true effects, each at its true nuisance value (``cogging:periods=17``,
+``delay:delay=12``...; records without an effect run the whole catalogue, as path (a)). What it still misses no
+search could find: the record does not show the effect against the identified base beyond the acceptance rules
+(significance, held-out error). A value the record cannot show is refused (exit 2) and counted as a failure.
+
+Results go to benchmarks/results/diagnosis_oracle.json and .md (with path (a) run beside it for comparison), or
+with ``--paths e,a --name diagnosis_told`` to diagnosis_told.json and .md.
+
+Run:  python benchmarks/bench_diagnosis_oracle.py [--slice 0:200] [--jobs 2] [--data DIR] [--paths o,a,e] [--name N]
 """
 
 from __future__ import annotations
@@ -58,14 +67,39 @@ def _write_oracle(folder: Path) -> Path:
     return linear_plant(truth["spec"], truth["cli"]).save(folder / ORACLE)
 
 
+def told_effects(spec: dict) -> str:
+    """The ``--effects`` selection of a record's true effects, nuisances at their true values (``"all"`` without
+    an effect)."""
+    items = []
+    for e in spec["effects"]:
+        name, p = e["name"], e["params"]
+        value = {"cogging": p.get("periods"), "stribeck": p.get("vs"), "backlash": p.get("half_width"),
+                 "deadzone": p.get("width"), "saturation": p.get("level"),
+                 "delay": round(p["delay_s"] / spec["dt"]) if "delay_s" in p else None}.get(name)
+        nuisance = _nuisance_of(name)
+        items.append(f"{name}:{nuisance}={value:.10g}" if value is not None and nuisance else name)
+    return ",".join(items) or "all"
+
+
+def _nuisance_of(name: str) -> str | None:
+    """cosim's nuisance parameter of a catalogued effect (None: it has none)."""
+    from cosim.diagnose.effects import EFFECTS
+
+    return EFFECTS[name].nuisance
+
+
 def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
-    """The generalisation benchmark's command lines, and path (o)'s (its model file written here)."""
+    """The generalisation benchmark's command lines, and those of paths (o) (its model file written here) and
+    (e)."""
     cmds = _commands(folder, cli, cosim)
     oracle = _write_oracle(folder)
     diagnose = list(cmds["b"][-1])
     diagnose[diagnose.index("--model") + 1] = str(oracle)
     diagnose[diagnose.index("-o") + 1] = str(folder / "model_after_o.json")
-    return {**cmds, "o": [diagnose]}
+    told = list(cmds["a"][-1])
+    told[told.index("-o") + 1] = str(folder / "model_after_e.json")
+    spec = json.loads((folder / "truth.json").read_text())["spec"]
+    return {**cmds, "o": [diagnose], "e": [[*told, "--effects", told_effects(spec)]]}
 
 
 def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
@@ -78,8 +112,11 @@ _commands, _heldout_figures = gen.commands, gen.heldout_figures
 
 def markdown(result: dict[str, Any]) -> str:
     """The per-effect table of each path, and the records only one of (o) and (a) names right first."""
-    titles = {"o": "(o) the plant's own linear part given as `--model`", "a": "(a) the default path (identifies first)"}
-    lines = ["# Diagnosis from the plant's own linear part (an oracle base)", "",
+    titles = {"o": "(o) the plant's own linear part given as `--model`", "a": "(a) the default path (identifies first)",
+              "e": "(e) the default path told the true effects and their nuisance values (`--effects`)"}
+    title = "from the plant's own linear part (an oracle base)" if "o" in result["summary"] else \
+        "told the records' true effects"
+    lines = [f"# Diagnosis {title}", "",
              f"Records {result['slice']} of the generalisation benchmark (at most {result['max_samples']} samples, "
              f"generator version {ip.GENERATOR_VERSION}); {result['jobs']} jobs; {result['wall_s']:.0f} s.", ""]
     for path in result["summary"]:
@@ -99,20 +136,35 @@ def markdown(result: dict[str, Any]) -> str:
         lines += [f"Named right first from the oracle base only: {', '.join(map(str, only['o'])) or 'none'}; "
                   f"from the identified base only: {', '.join(map(str, only['a'])) or 'none'}. By either: "
                   f"{either} of {len(rows)} ({100.0 * either / max(len(rows), 1):.1f} %).", ""]
+    if {"e", "a"} <= set(result["summary"]):
+        rows = [r for r in result["rows"] if r.get("truth")]
+        found = [r["index"] for r in rows if r.get("e", {}).get("right_first") and not r["a"].get("right_first")]
+        missed = [r["index"] for r in rows if not r.get("e", {}).get("right_first")]
+        refused = [r["index"] for r in rows if any(f.get("path") == "e" for f in r.get("failures", []))]
+        lines += [f"Of {len(rows)} records with an effect, named right first when told and not by the default "
+                  f"search: {_listed(found)} ({len(found)}). Not named right first even when told: {len(missed)} "
+                  f"({_listed(missed)}); of these the told value was refused as outside what the record shows, or "
+                  f"the run failed: {_listed(refused)}.", ""]
     return "\n".join(lines)
+
+
+def _listed(indices: list[int]) -> str:
+    return ", ".join(map(str, indices)) or "none"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slice", default="0:200", help="'A:B' or 'i,j,k'")
     gen.add_run_arguments(parser, paths="o,a")
+    parser.add_argument("--name", default="diagnosis_oracle",
+                        help="the results' file name in --out (diagnosis_told for paths e,a)")
     args = parser.parse_args()
     gen.commands, gen.heldout_figures = commands, heldout_figures  # (the workers are forked: they see these too)
     data = Path(args.data) if args.data else Path(os.environ.get("TMPDIR", "/tmp")) / "cosim-diagnosis-records"
-    result = gen.run(gen._parse_slice(args.slice, 200), out=Path(args.out) / "diagnosis_oracle", data_dir=data,
+    result = gen.run(gen._parse_slice(args.slice, 200), out=Path(args.out) / args.name, data_dir=data,
                      max_samples=args.max_samples, paths=tuple(p.strip() for p in args.paths.split(",")),
                      cosim=args.cosim, jobs=args.jobs, timeout=args.timeout, write=False)
-    gen._write(result, Path(args.out) / "diagnosis_oracle", markdown)
+    gen._write(result, Path(args.out) / args.name, markdown)
     print(markdown(result))
 
 

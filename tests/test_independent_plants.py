@@ -146,3 +146,23 @@ def test_the_oracle_base_is_the_record_plant_without_its_effects(record):
     assert sim.ok
     for i in range(len(plant.states)):
         assert np.max(np.abs(sim.states[:, i] - without[:, i])) < 1e-3 * np.ptp(without[:, i])
+
+
+def test_the_told_path_names_the_true_effects_at_their_true_nuisance_values():
+    """Path (e) of benchmarks/bench_diagnosis_oracle.py tells ``cosim diagnose --effects`` the record's effects, each
+    at its true nuisance value in cosim's units (a delay in samples), in a selection cosim parses."""
+    import bench_diagnosis_oracle as oracle
+
+    from cosim.diagnose.effects import effect_selection
+
+    spec = {"dt": 0.002, "effects": [
+        {"name": "delay", "params": {"delay_s": 0.0286}},
+        {"name": "cogging", "params": {"amplitude": 0.1, "periods": 17.0, "phase": 0.3}},
+        {"name": "stribeck", "params": {"Fs": 1.0, "vs": 0.25, "eps": 1e-3}},
+        {"name": "gravity", "params": {"G": 2.0}}]}
+    told = oracle.told_effects(spec)
+    assert told == "delay:delay=14,cogging:periods=17,stribeck:vs=0.25,gravity"
+    parsed = effect_selection(told)
+    assert parsed.fixed == {"delay": 14.0, "cogging": 17.0, "stribeck": 0.25}
+    assert list(parsed.names) == ["delay", "cogging", "stribeck", "gravity"]
+    assert oracle.told_effects({"dt": 0.002, "effects": []}) == "all"
