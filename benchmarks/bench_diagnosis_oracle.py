@@ -145,6 +145,11 @@ def markdown(result: dict[str, Any]) -> str:
                   f"search: {_listed(found)} ({len(found)}). Not named right first even when told: {len(missed)} "
                   f"({_listed(missed)}); of these the told value was refused as outside what the record shows, or "
                   f"the run failed: {_listed(refused)}.", ""]
+        neither = [r["index"] for r in rows if not r.get("e", {}).get("right_first") and not r["a"].get("right_first")]
+        either = sum(bool(r.get("e", {}).get("right_first") or r["a"].get("right_first")) for r in result["rows"])
+        lines += [f"Named right first by either path: {either} of {len(result['rows'])} "
+                  f"({100.0 * either / max(len(result['rows']), 1):.1f} %); by neither, among the records with an "
+                  f"effect: {len(neither)} ({_listed(neither)}).", ""]
     return "\n".join(lines)
 
 
