@@ -69,23 +69,15 @@ def _write_oracle(folder: Path) -> Path:
 
 def told_effects(spec: dict) -> str:
     """The ``--effects`` selection of a record's true effects, nuisances at their true values (``"all"`` without
-    an effect)."""
-    items = []
-    for e in spec["effects"]:
-        name, p = e["name"], e["params"]
-        value = {"cogging": p.get("periods"), "stribeck": p.get("vs"), "backlash": p.get("half_width"),
-                 "deadzone": p.get("width"), "saturation": p.get("level"),
-                 "delay": round(p["delay_s"] / spec["dt"]) if "delay_s" in p else None}.get(name)
-        nuisance = _nuisance_of(name)
-        items.append(f"{name}:{nuisance}={value:.10g}" if value is not None and nuisance else name)
-    return ",".join(items) or "all"
-
-
-def _nuisance_of(name: str) -> str | None:
-    """cosim's nuisance parameter of a catalogued effect (None: it has none)."""
+    an effect). The simulator names a nuisance as cosim does, but for the delay (seconds; cosim's in samples)."""
     from cosim.diagnose.effects import EFFECTS
 
-    return EFFECTS[name].nuisance
+    items = []
+    for e in spec["effects"]:
+        name, params, nuisance = e["name"], e["params"], EFFECTS[e["name"]].nuisance
+        value = round(params["delay_s"] / spec["dt"]) if name == "delay" else params.get(nuisance)
+        items.append(f"{name}:{nuisance}={value:.10g}" if value is not None else name)
+    return ",".join(items) or "all"
 
 
 def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
