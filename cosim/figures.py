@@ -25,7 +25,15 @@ from .files import atomic_output
 if TYPE_CHECKING:
     import matplotlib.figure
 
-__all__ = ["pyplot", "save_figure"]
+__all__ = ["new_figure", "pyplot", "save_figure"]
+
+
+def new_figure(**kwargs: Any) -> matplotlib.figure.Figure:
+    """A matplotlib Figure outside pyplot: no backend switched, nothing to close, shown inline by Jupyter when
+    returned, written by :func:`save_figure` (keyword arguments go to ``Figure``)."""
+    from matplotlib.figure import Figure
+
+    return Figure(**kwargs)
 
 
 def pyplot() -> Any:
@@ -38,9 +46,11 @@ def pyplot() -> Any:
     return plt
 
 
-def save_figure(fig: matplotlib.figure.Figure, path: str | os.PathLike, *, dpi: int = 110) -> Path:
-    """Save `fig` as PNG atomically, close it, and return the path."""
+def save_figure(fig: matplotlib.figure.Figure, path: str | os.PathLike, *, dpi: int = 110,
+                close: bool = True) -> Path:
+    """Save `fig` as PNG atomically, close it in pyplot (unless `close` is false), and return the path."""
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi)
-    pyplot().close(fig)
+    if close and fig.canvas.manager is not None:  # a pyplot figure; new_figure's have no manager
+        pyplot().close(fig)
     return Path(path)

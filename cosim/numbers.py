@@ -1,4 +1,5 @@
-"""Parse numbers written by people on command lines and in specs: ``0.3``, ``1e-3``, ``1/2257``.
+"""Parse numbers written by people on command lines and in specs: ``0.3``, ``1e-3``, ``1/2257``; and
+:func:`check_memory`, which refuses up front an array of numbers the machine cannot hold.
 
 No ``eval``: a number, or a fraction of two numbers.
 
@@ -13,11 +14,52 @@ True
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 from .errors import InvalidSettingError
 
-__all__ = ["finite_number", "parse_number"]
+__all__ = ["MEMORY_FRACTION", "available_memory", "check_memory", "finite_number", "parse_number"]
+
+#: The share of the machine's available memory one array of results may take (the rest: copies, the OS).
+MEMORY_FRACTION = 0.5
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``, else the physical memory), or
+    None where neither can be read. ``COSIM_MEMORY_LIMIT`` (bytes) overrides it."""
+    if os.environ.get("COSIM_MEMORY_LIMIT"):
+        return int(parse_number(os.environ["COSIM_MEMORY_LIMIT"], what="COSIM_MEMORY_LIMIT"))
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_memory(n_values: float, *, what: str, hint: str, fraction: float = MEMORY_FRACTION) -> None:
+    """Refuse, before allocating, `n_values` float64 numbers that would take more than `fraction` of the
+    available memory: an :class:`~cosim.errors.InvalidSettingError` with both figures and `hint`.
+
+    Examples
+    --------
+    >>> check_memory(1e3, what="a simulation of 1000 samples", hint="use a larger dt")
+    >>> check_memory(1e20, what="a simulation of 1e20 values", hint="use a larger dt")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    cosim.errors.InvalidSettingError: a simulation of 1e20 values needs 8e+11 GB, more than 50% of the...; use a larger dt
+    """
+    available = available_memory()
+    need = 8.0 * float(n_values)
+    if available is not None and need > fraction * available:
+        raise InvalidSettingError(f"{what} needs {need / 1e9:.3g} GB, more than {fraction:.0%} of the "
+                                  f"{available / 1e9:.3g} GB this machine has available; {hint}")
 
 
 def parse_number(text: str | float, *, what: str = "value") -> float:

@@ -84,9 +84,25 @@ def test_validate_bad_input_is_one_line(pid_file, args, message):
     assert "Traceback" not in result.output
 
 
+def test_design_pid_reads_the_old_output_option_as_the_tracked_signal_with_a_warning(model_file, tmp_path):
+    new = CliRunner().invoke(main, ["design", "pid", str(model_file), "--tracked", "theta_L", "-o",
+                                    str(tmp_path / "new.json"), "--json"])
+    old = CliRunner().invoke(main, ["design", "pid", str(model_file), "--output", "theta_L", "--out",
+                                    str(tmp_path / "old.json"), "--json"])
+    assert new.exit_code == 0 and old.exit_code == 0, old.output
+    assert "warning: --output theta_L (a signal) is deprecated and will be removed; use --tracked theta_L" in old.stderr
+    assert "warning: --out FILE is deprecated" in old.stderr and "warning" not in new.stderr
+    first, second = (json.loads((tmp_path / f).read_text()) for f in ("new.json", "old.json"))
+    assert first["settings"]["outputs"] == ["theta_L"] and first == second
+
+
 def test_design_errors_are_one_line(model_file, tmp_path):
-    result = CliRunner().invoke(main, ["design", "pid", str(model_file), "--output", "theta_X"])
+    result = CliRunner().invoke(main, ["design", "pid", str(model_file), "--tracked", "theta_X"])
     assert result.exit_code == 2 and "theta_X" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(main, ["design", "pid", str(model_file), "--output", "theta_X"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "-o/--output theta_X is neither a .json file nor an output of the model (theta_m" in result.output
+    assert list(tmp_path.iterdir()) == []
     result = CliRunner().invoke(main, ["design", "mpc", str(tmp_path / "none.json")])
     assert result.exit_code == 2 and "not found" in result.output
     bad = tmp_path / "ctrl.json"

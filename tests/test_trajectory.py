@@ -198,14 +198,41 @@ def test_round_trip_is_exact(tmp_path, suffix):
     assert np.array_equal(back.values, original.values) and np.array_equal(back.time, original.time)
 
 
-def test_csv_layout_is_plain(tmp_path, traj):
+def test_csv_is_plain_and_its_header_is_in_the_sidecar(tmp_path, traj):
     path = traj.to_csv(tmp_path / "run.csv")
-    first, header = path.read_text(encoding="utf-8").splitlines()[:2]
-    assert first.startswith("# cosim-trajectory v1 {")
-    assert json.loads(first[len("# cosim-trajectory v1 "):])["units"]["theta_m"] == "rad"
-    assert header == "time,Tm,theta_m,omega_m,y"
-    frame = pd.read_csv(path, comment="#")  # what another tool sees
+    assert path.read_text(encoding="utf-8").splitlines()[0] == "time,Tm,theta_m,omega_m,y"
+    frame = pd.read_csv(path)  # what another tool sees, with no options
+    assert list(frame.columns) == ["time", "Tm", "theta_m", "omega_m", "y"]
     np.testing.assert_array_equal(frame["omega_m"].to_numpy(), traj["omega_m"])
+    np.testing.assert_array_equal(frame["time"].to_numpy(), traj.time)
+    side = json.loads((tmp_path / "run.meta.json").read_text())
+    assert side["format"] == "cosim-trajectory" and side["columns"] == list(frame.columns)
+    assert side["units"]["theta_m"] == "rad" and side["roles"]["Tm"] == "input"
+    assert side["sample_time"] == pytest.approx(traj.dt)
+
+
+def test_a_csv_without_its_sidecar_reads_as_a_plain_table(tmp_path, traj):
+    path = traj.to_csv(tmp_path / "run.csv")
+    (tmp_path / "run.meta.json").unlink()
+    back = Trajectory.read(path)
+    assert back.names == traj.names and back.roles == ("output",) * 4 and back.units == ("",) * 4
+    np.testing.assert_array_equal(back.values, traj.values)
+
+
+def test_a_sidecar_of_other_columns_is_ignored_with_a_warning(tmp_path, traj):
+    path = traj.to_csv(tmp_path / "run.csv")
+    traj.select(["Tm", "y"]).to_csv(tmp_path / "other.csv")
+    (tmp_path / "other.meta.json").replace(tmp_path / "run.meta.json")
+    with pytest.warns(UserWarning, match="run.meta.json describes columns .* not those of run.csv"):
+        back = Trajectory.read(path)
+    assert back.roles == ("output",) * 4
+
+
+def test_a_foreign_sidecar_is_refused(tmp_path, traj):
+    path = traj.to_csv(tmp_path / "run.csv")
+    (tmp_path / "run.meta.json").write_text('{"author": "someone"}')
+    with pytest.raises(DataError, match="run.meta.json beside run.csv is not a cosim-trajectory sidecar"):
+        Trajectory.read(path)
 
 
 def test_read_selects_columns_and_overrides_roles(tmp_path, traj):
@@ -290,10 +317,38 @@ def test_writes_are_atomic(tmp_path, monkeypatch, traj, suffix):
     monkeypatch.undo()
 
     traj.write(target)
-    before = target.read_bytes()
+    written = sorted(tmp_path.iterdir())  # a CSV has its sidecar run.meta.json
+    before = [p.read_bytes() for p in written]
     monkeypatch.setattr(pd.DataFrame, "to_csv", _fail_midway_csv)
     monkeypatch.setattr(pq, "write_table", _fail_midway_parquet)
     with pytest.raises(OSError):
         traj.with_meta({"second": True}).write(target)
-    assert target.read_bytes() == before  # the old file survives whole
-    assert [p.name for p in tmp_path.iterdir()] == [target.name]
+    assert [p.read_bytes() for p in written] == before  # the old files survive whole
+    assert sorted(tmp_path.iterdir()) == written
+    assert Trajectory.read(target).meta == traj.meta
+
+
+def test_from_pandas_round_trips_to_pandas(traj):
+    back = Trajectory.from_pandas(traj.to_pandas())
+    assert back == traj and back.units == traj.units and back.roles == traj.roles and back.meta == traj.meta
+
+
+def test_from_pandas_takes_a_time_column_or_a_time_index(traj):
+    frame = pd.DataFrame({"t": [0.0, 0.5, 1.0], "u": [1, 0, 1], "y": [0.0, 0.25, 0.5]})
+    got = Trajectory.from_pandas(frame, time="t", roles={"u": "input"}, units={"y": "m"})
+    assert got.names == ("u", "y") and got.roles == ("input", "output") and got.units == ("", "m")
+    np.testing.assert_array_equal(got.time, [0.0, 0.5, 1.0])
+    stamped = frame.drop(columns="t").set_index(pd.Timestamp("2026-01-01") + pd.to_timedelta(
+        [0.0, 0.5, 1.0], unit="s"))
+    np.testing.assert_allclose(Trajectory.from_pandas(stamped).time, [0.0, 0.5, 1.0])
+    with pytest.raises(DataError, match="plain row-number index; pass time="):
+        Trajectory.from_pandas(frame.drop(columns="t"))
+    with pytest.raises(DataError, match="column.s. name of the DataFrame are not numbers"):
+        Trajectory.from_pandas(frame.assign(name="a"), time="t")
+
+
+def test_plot_returns_a_figure_with_units_and_writes_it_when_asked(tmp_path, traj):
+    fig = traj.plot(["Tm", "theta_m"], path=tmp_path / "p.png", title="run")
+    assert [ax.get_ylabel() for ax in fig.axes] == ["Tm\n[N.m]", "theta_m\n[rad]"]
+    assert fig.axes[-1].get_xlabel() == "time [s]"
+    assert (tmp_path / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

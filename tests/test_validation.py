@@ -54,10 +54,33 @@ def test_specs_are_read_with_units_and_aliases(text, metric, op, limit):
     ("overshoot<=ten", "limit of spec"),
     ("steady_state_error<=1ms", "not a time"),
     ("settling_time<=10%", "not a percentage"),
+    ("settle_time<=1", "unknown metric 'settle_time'; known: .*settling_time"),
+    ("theta_L.deadline_misses<=0", "unknown metric 'theta_L.deadline_misses'"),
 ])
 def test_bad_specs_say_how_to_write_them(text, match):
     with pytest.raises(SpecError, match=match):
         parse_spec(text)
+
+
+def test_the_default_specs_judge_the_loop_not_the_machine():
+    from cosim.loop.validation import KNOWN_METRICS, TELESCOPE_SPECS, TIMING_SPECS
+
+    timing = {"deadline_misses", "deadline_miss_rate", "solve_time_median_us", "solve_time_p99_us",
+              "solve_time_max_us", "realtime_factor"}
+    assert not {parse_spec(s).metric for s in TELESCOPE_SPECS} & timing
+    assert {parse_spec(s).metric for s in TIMING_SPECS} <= timing <= set(KNOWN_METRICS)
+
+
+def test_cli_refuses_an_unknown_metric_before_running_anything(tmp_path):
+    from click.testing import CliRunner
+
+    from cosim.cli import main
+
+    result = CliRunner().invoke(main, ["validate", str(tmp_path / "none.fmu"), str(tmp_path / "none.json"),
+                                       "--spec", "overshot<=10%"])
+    assert result.exit_code == 2, result.output
+    assert "unknown metric 'overshot'" in result.output and "overshoot" in result.output
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_scenarios_from_text_and_their_signals():

@@ -1,7 +1,8 @@
 """What every ``cosim`` command shares: one-line errors, text or JSON output, and readers of option values.
 
 * :func:`_friendly` - a command's library errors become one ``error: ...`` line on stderr and an exit status
-  (:data:`EXIT_RESULT`, :data:`EXIT_INPUT`, :data:`EXIT_INTERNAL`);
+  (:data:`EXIT_RESULT`, :data:`EXIT_INPUT`, :data:`EXIT_INTERNAL`), its warnings one ``warning: ...`` line;
+* :func:`_deprecated` - an old option spelling that still works says so, once, on stderr;
 * :func:`_emit` - the result as text, or as one JSON object with ``--json``;
 * :func:`_pairs`, :func:`_names`, :func:`_ranges` - ``NAME=VALUE``, ``A,B,...`` and ``NAME=LOW:HIGH`` options;
 * :func:`_resolve_fmu` - an FMU argument: a path, or ``bundled`` / ``bundled3`` for the bundled servo.
@@ -13,6 +14,7 @@ import functools
 import json
 import os
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -47,7 +49,9 @@ def _friendly(func: Callable) -> Callable:
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return func(*args, **kwargs)
+            with warnings.catch_warnings():
+                warnings.showwarning = _one_line_warning
+                return func(*args, **kwargs)
         except CosimError as exc:
             if os.environ.get("COSIM_DEBUG"):
                 raise
@@ -64,6 +68,16 @@ def _friendly(func: Callable) -> Callable:
             sys.exit(EXIT_INTERNAL)
 
     return wrapper
+
+
+def _one_line_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
+    """``warning: ...`` on stderr, one line: not the ``file:line: UserWarning:`` of Python's default."""
+    click.echo(f"warning: {' '.join(str(message).split())}", err=True)
+
+
+def _deprecated(old: str, new: str) -> None:
+    """Say on stderr that option spelling `old` still works but is deprecated in favour of `new`."""
+    click.echo(f"warning: {old} is deprecated and will be removed; use {new}", err=True)
 
 
 def _pairs(items: tuple[str, ...], option: str) -> dict[str, str]:

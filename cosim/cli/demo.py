@@ -10,18 +10,19 @@ __all__ = ["demo"]
 
 
 @click.command()
-@click.option("--out", "out_dir", default="cosim-demo", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out-dir", "--out", "out_dir", default="cosim-demo", show_default=True,
+              type=click.Path(file_okay=False),
               help="Folder for the results.")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
 def demo(out_dir: str, as_json: bool) -> None:
     """Run the main job on the bundled servo FMU and write its results (data, models, controllers, plots, one
-    HTML report) to --out: a linear model of friction-laden noisy data, the diagnosis of the friction it lacks,
+    HTML report) to --out-dir: a linear model of friction-laden noisy data, the diagnosis of the friction it lacks,
     PID and MPC designed on each model and validated on the FMU.
 
     \b
     Example:
-      cosim demo --out cosim-demo
+      cosim demo --out-dir cosim-demo
     """
     from ..demo import run_demo, summary_lines
 

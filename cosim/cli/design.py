@@ -8,7 +8,7 @@ import click
 
 from ..errors import InvalidSettingError
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _names, _ranges
+from ._command import _deprecated, _emit, _friendly, _names, _ranges
 
 __all__ = ["design"]
 
@@ -19,7 +19,7 @@ def design() -> None:
 
     \b
     Example:
-      cosim design pid model.json --output theta_L --velocity omega_m --u-max 5000 -o pid.json
+      cosim design pid model.json --tracked theta_L --velocity omega_m --u-max 5000 -o pid.json
       cosim design mpc model.json --measured theta_m,theta_L --tracked theta_L --u-max 5000 -o mpc.json
     """
 
@@ -65,7 +65,8 @@ def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], l
 @design.command("pid")
 @click.argument("model_path", metavar="MODEL.json")
 @click.option("--input", "input_name", default=None, help="Manipulated input (default: the model's first).")
-@click.option("--output", "output_name", default=None, help="Controlled output (default: the model's first).")
+@click.option("--tracked", "output_name", default=None, metavar="Y",
+              help="Controlled (tracked) output (default: the model's first).")
 @click.option("--velocity", default=None, metavar="Y",
               help="Take the derivative action from this measured velocity (e.g. omega_m, the motor's) instead of "
                    "differentiating the output: damps a two-mass resonance.")
@@ -77,23 +78,44 @@ def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], l
 @click.option("--u-min", default=None, help="Lower input limit (default: -u-max).")
 @click.option("--u-max", default=None, help="Upper input limit, e.g. 5000.")
 @click.option("--du-max", default=None, help="Largest input change per sample.")
-@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None, help="Write the controller JSON.")
+@click.option("-o", "--output", "outputs", multiple=True, metavar="FILE",
+              help="Write the controller JSON. (Before 0.2, --output named the tracked signal: a model output given "
+                   "here is still read so, with a deprecation warning.)")
+@click.option("--out", "old_out", type=click.Path(dir_okay=False), default=None, hidden=True)
 @click.option("--json", "as_json", is_flag=True, help="Print the gains and margins as JSON.")
 @_friendly
 def design_pid(model_path: str, input_name: str | None, output_name: str | None, velocity: str | None,
                dt_text: str | None,
                phase_margin: float | None, bandwidth_hz: float | None, gain_margin_db: float, no_derivative: bool,
-               u_min: str | None, u_max: str | None, du_max: str | None, out: str | None, as_json: bool) -> None:
+               u_min: str | None, u_max: str | None, du_max: str | None, outputs: tuple[str, ...],
+               old_out: str | None, as_json: bool) -> None:
     """Tune a discrete PID on the model for a phase margin or a bandwidth; report the margins achieved.
 
     \b
     Example:
-      cosim design pid model.json --input Tm --output theta_L --velocity omega_m --u-max 5000 -o pid.json
+      cosim design pid model.json --input Tm --tracked theta_L --velocity omega_m --u-max 5000 -o pid.json
     """
     from controllers.base import DesignModel
     from controllers.pid import tune_pid
 
     sys_c, dt, _ = _design_model(model_path, dt_text)
+    signals = [o for o in outputs if o in sys_c.output_labels and not o.lower().endswith(".json")]
+    files = [o for o in outputs if o not in signals] + ([old_out] if old_out else [])
+    if old_out:
+        _deprecated("--out FILE", "-o/--output FILE")
+    if signals:
+        _deprecated(f"--output {signals[0]} (a signal)", f"--tracked {signals[0]}")
+        if output_name is not None or len(signals) > 1:
+            raise InvalidSettingError("give the tracked output once, with --tracked")
+        output_name = signals[0]
+    odd = [f for f in files if not f.lower().endswith(".json")]
+    if odd:
+        raise InvalidSettingError(f"-o/--output {odd[0]} is neither a .json file nor an output of the model "
+                                  f"({', '.join(sys_c.output_labels)}); write the controller to FILE.json and name "
+                                  "the tracked output with --tracked")
+    if len(files) > 1:
+        raise InvalidSettingError(f"one controller file, please: -o/--output was given {', '.join(files)}")
+    out = files[0] if files else None
     lo, hi = _bounds(u_min, u_max)
     pid = tune_pid(sys_c, dt=dt, input=input_name, output=output_name, velocity=velocity, phase_margin=phase_margin,
                    bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
@@ -127,14 +149,16 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
 @click.option("--disturbance", type=click.Choice(["input", "output", "none"]), default="input", show_default=True,
               help="Disturbance model for offset-free tracking.")
 @click.option("--no-codegen", is_flag=True, help="Evaluate the QP through casadi's Python API instead of C.")
-@click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default=None, help="Write the controller JSON.")
+@click.option("-o", "--output", "out", type=click.Path(dir_okay=False), default=None,
+              help="Write the controller JSON.")
+@click.option("--out", "old_out", type=click.Path(dir_okay=False), default=None, hidden=True)
 @click.option("--json", "as_json", is_flag=True, help="Print the design figures as JSON.")
 @_friendly
 def design_mpc(model_path: str, input_names: str | None, measured: str | None, tracked: str | None,
                dt_text: str | None, horizon: int, q_text: str | None, q_rate: str | None, r_text: str | None,
                r_delta: str | None, u_min: str | None, u_max: str | None, du_max: str | None,
                state_bounds: tuple[str, ...], hard_state_bounds: bool, disturbance: str, no_codegen: bool,
-               out: str | None, as_json: bool) -> None:
+               out: str | None, old_out: str | None, as_json: bool) -> None:
     """Design a linear MPC (casadi, condensed QP, DAQP compiled to C) on the model.
 
     Terminal cost from the discrete Riccati equation, input and input-rate bounds, soft state bounds,
@@ -146,6 +170,11 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
     """
     from controllers.mpc import MPC
 
+    if old_out:
+        _deprecated("--out FILE", "-o/--output FILE")
+        if out:
+            raise InvalidSettingError("one controller file, please: give -o/--output only")
+        out = old_out
     sys_c, dt, _ = _design_model(model_path, dt_text)
     lo, hi = _bounds(u_min, u_max)
     weights = {key: parse_number(text, what=f"--{key.replace('_', '-')}")

@@ -22,7 +22,7 @@ def _name_values(text: str | None, option: str) -> dict[str, float] | None:
 
 @click.command("export")
 @click.argument("model_path", metavar="MODEL.json")
-@click.option("--to", "targets", multiple=True, required=True, metavar="FILE",
+@click.option("-o", "--output", "--to", "targets", multiple=True, required=True, metavar="FILE",
               help="Output file; the suffix picks the format: .mat (A, B, C, D with names), .fmu (FMI 2.0 "
                    "co-simulation), .json (the model). Repeat for several.")
 @click.option("--dt", default=None, help="Discretise (zero-order hold) at this step [s]; an FMU needs it for a "
@@ -42,7 +42,7 @@ def export_command(model_path: str, targets: tuple[str, ...], dt: str | None, co
 
     \b
     Example:
-      cosim export model.json --to statespace.mat --to model.fmu
+      cosim export model.json -o statespace.mat -o model.fmu
     """
     from ..export import export
     from ..identify.model import IdentifiedModel

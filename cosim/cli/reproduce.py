@@ -23,7 +23,8 @@ def reproduce() -> None:
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Dask scheduler address (tcp://host:8786); default: local processes.")
 @click.option("--workers", default=None, type=click.IntRange(1, 512), help="Local processes (default: all cores).")
-@click.option("--out", "out_dir", default="paper-repro", show_default=True, type=click.Path(file_okay=False),
+@click.option("--out-dir", "--out", "out_dir", default="paper-repro", show_default=True,
+              type=click.Path(file_okay=False),
               help="Folder for the tables, plots and report.html.")
 @click.option("--noise", "noise_levels", default=None, metavar="LEVELS",
               help="Comma-separated subset of the study's noise levels, e.g. 0,0.1,0.5.")
@@ -43,7 +44,7 @@ def reproduce_paper_command(seeds: int, scheduler: str | None, workers: int | No
 
     \b
     Example:
-      cosim reproduce paper --seeds 3 --out paper-repro --json
+      cosim reproduce paper --seeds 3 --out-dir paper-repro --json
     """
     from ..study.paper import STUDY_NOISE_LEVELS
     from ..study.reproduce import reproduce_paper

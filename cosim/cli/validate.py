@@ -24,7 +24,9 @@ __all__ = ["validate_command"]
               help="FMU parameter for every scenario, e.g. --set Fc=100 (Coulomb friction on). Repeatable.")
 @click.option("--spec", "specs", multiple=True, metavar="METRIC<=LIMIT",
               help="settling_time<=1, overshoot<=10%, steady_state_error<=2e-5, input_limit<=5000, "
-                   "deadline_miss_rate<=0.001, solve_time_p99<=50us, ... Repeatable. Default: the telescope specs.")
+                   "deadline_miss_rate<=0.001, solve_time_p99<=50us, ... (quote it: the shell reads < and >). "
+                   "Repeatable. Default: the telescope's control specs; compute time is reported, and judged "
+                   "only when a timing spec is given.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
 @click.option("--plots", "plots_dir", type=click.Path(file_okay=False), default=None,
@@ -57,7 +59,7 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
     \b
     Example:
       cosim validate bundled ctrl.json --scenario step:amp=0.01,duration=2 --set Fc=100 --json
-      cosim validate bundled ctrl.json --spec settling_time<=1 --spec overshoot<=10% --report v.html
+      cosim validate bundled ctrl.json --spec "settling_time<=1" --spec "overshoot<=10%" --report v.html
       cosim validate bundled ctrl.json --robustness 50 --spread 0.2 --effect Fc=0:200
     """
     from controllers.base import load_controller
@@ -65,6 +67,8 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
     from ..loop.validation import TELESCOPE_SPECS, parse_scenario, parse_spec, validate
     from ..loop.validation_report import write_validation_report
 
+    scenario_list = [parse_scenario(s) for s in (scenarios or ("step:amp=0.01,at=0.05,duration=2",))]
+    spec_list = [parse_spec(s) for s in (specs or TELESCOPE_SPECS)]  # refused before anything runs
     fmu = _resolve_fmu(fmu_path)
     if not fmu.is_file():
         from ..errors import FmuNotFoundError
@@ -72,8 +76,6 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
         raise FmuNotFoundError(f"FMU not found: {fmu}; build the bundled one with `cosim fmu build` or pass bundled")
     controller = load_controller(controller_path)
     parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
-    scenario_list = [parse_scenario(s) for s in (scenarios or ("step:amp=0.01,at=0.05,duration=2",))]
-    spec_list = [parse_spec(s) for s in (specs or TELESCOPE_SPECS)]
     verdict = validate(fmu, controller, scenario_list, spec_list, parameters=parameters or None,
                        model=None if no_model else "design")
     rob = None

@@ -3,7 +3,10 @@
 The formats are described in :mod:`cosim.data.trajectory`. Writers take a trajectory and write atomically
 (:func:`~cosim.files.atomic_output`); :func:`read_file` gives the time column, the signals and the cosim header
 (units, roles, meta) of a cosim file or of another tool's table, for :meth:`Trajectory.read` to build from.
-pandas and pyarrow are imported when a file is written or read, not with cosim.
+A CSV is plain (a header row, then numbers: what ``pandas.read_csv`` and MATLAB ``readtable`` read as is); its
+header lives in the sidecar ``NAME.meta.json``. CSVs of cosim < 0.2 carried it in a first comment line
+``# cosim-trajectory v1 {...}``; they still read. pandas and pyarrow are imported when a file is written or
+read, not with cosim.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from types import MappingProxyType
@@ -19,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import DataError, FmuNotFoundError, InvalidSettingError
-from ..files import atomic_output
+from ..files import atomic_output, json_default, write_text_atomic
 from ._trajectory_checks import _TIME, _as_names
 
 if TYPE_CHECKING:
@@ -27,10 +31,11 @@ if TYPE_CHECKING:
 
     from .trajectory import Trajectory
 
-__all__ = ["read_file", "write_csv", "write_parquet"]
+__all__ = ["read_file", "sidecar_path", "write_csv", "write_parquet"]
 
 _FORMAT = "cosim-trajectory"
 _VERSION = 1
+_SIDECAR_VERSION = 2
 _CSV_PREFIX = f"# {_FORMAT} v"
 _PARQUET_KEY = _FORMAT.encode()
 _SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet"})
@@ -50,15 +55,28 @@ def _header(traj: Trajectory) -> dict[str, Any]:
             "roles": dict(zip(traj.names, traj.roles, strict=True)), "meta": traj.meta}
 
 
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """The metadata file beside a CSV: ``run.csv`` -> ``run.meta.json``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.meta.json")
+
+
 def write_csv(traj: Trajectory, path: str | os.PathLike) -> Path:
-    """Write `traj` to a CSV file atomically and return its path."""
+    """Write `traj` as a plain CSV file and its header as the sidecar ``NAME.meta.json``, both atomically.
+
+    The sidecar names the CSV's columns, so that a reader can tell a sidecar left from another file apart.
+    """
     import pandas as pd
 
     frame = pd.DataFrame(traj.values, columns=list(traj.names))
     frame.insert(0, _TIME, traj.time)
+    dt = float(np.median(np.diff(traj.time))) if len(traj) > 1 and traj.is_uniform() else None
+    sidecar = {"format": _FORMAT, "version": _SIDECAR_VERSION, "data": Path(path).name,
+               "columns": [_TIME, *traj.names], "sample_time": dt, **_header(traj)}
     with atomic_output(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
-        handle.write(f"{_CSV_PREFIX}{_VERSION} {json.dumps(_header(traj))}\n")
         frame.to_csv(handle, index=False, lineterminator="\n")
+        handle.close()
+        write_text_atomic(sidecar_path(path), json.dumps(sidecar, indent=1, default=json_default) + "\n")
     return Path(path)
 
 
@@ -129,13 +147,13 @@ def _read_csv(path: Path, time: str, wanted: Sequence[str] | None
               ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
     import pandas as pd
 
-    header: dict[str, Any] = {}
+    header: dict[str, Any] = _read_sidecar(path)
     skip = 0
     with open(path, encoding="utf-8-sig") as handle:
         for line in handle:
             if not line.startswith("#"):
                 break
-            if skip == 0 and line.startswith(_CSV_PREFIX):
+            if skip == 0 and line.startswith(_CSV_PREFIX) and not header:
                 version, _, body = line[len(_CSV_PREFIX):].partition(" ")
                 header = _parse_header(path, version, body)
             skip += 1
@@ -151,7 +169,29 @@ def _read_csv(path: Path, time: str, wanted: Sequence[str] | None
         raise DataError(f"cannot read {path.name} as CSV ({reason}); expected a header row then numbers"
                         ) from None
     data = {name: _numeric(path, name, frame[name]) for name in names}
+    if header.get("columns") not in (None, present):
+        warnings.warn(f"{sidecar_path(path).name} describes columns {header['columns']}, not those of "
+                      f"{path.name}; its units, roles and meta are ignored (rewrite or delete it)", stacklevel=4)
+        header = {}
     return _numeric(path, time, frame[time]), data, header
+
+
+def _read_sidecar(path: Path) -> dict[str, Any]:
+    """The header in ``NAME.meta.json`` beside `path` (``{}`` when there is none)."""
+    side = sidecar_path(path)
+    if not side.is_file():
+        return {}
+    try:
+        header = json.loads(side.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        header = None
+    if not isinstance(header, dict) or header.get("format") != _FORMAT:
+        raise DataError(f"{side.name} beside {path.name} is not a {_FORMAT} sidecar (expected JSON with "
+                        f'"format": "{_FORMAT}"); delete or rename it')
+    if header.get("version") != _SIDECAR_VERSION:
+        raise DataError(f"{side.name} has {_FORMAT} version {header.get('version')!r}; this cosim reads "
+                        f"version {_SIDECAR_VERSION}; rewrite the file with this cosim")
+    return header
 
 
 def _parse_header(path: Path, version: Any, body: str | bytes) -> dict[str, Any]:

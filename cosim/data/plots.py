@@ -16,10 +16,11 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..figures import pyplot, save_figure
+from ..figures import save_figure
+from ._trajectory_figure import trajectory_figure
 from .trajectory import Trajectory
 
-__all__ = ["plot_trajectory"]
+__all__ = ["plot_trajectory", "trajectory_figure"]
 
 
 def plot_trajectory(
@@ -32,6 +33,8 @@ def plot_trajectory(
 ) -> Path:
     """Plot every signal of `traj` against time, one panel each (inputs first, as steps), as PNG.
 
+    :func:`trajectory_figure` draws it; this writes it to `path` and returns the path.
+
     Parameters
     ----------
     traj : Trajectory
@@ -43,23 +46,4 @@ def plot_trajectory(
     label, title : str
         Legend label of `traj`, and the figure title.
     """
-    plt = pyplot()
-    names = list(traj.inputs) + [n for n in traj.names if n not in traj.inputs]
-    fig, axes = plt.subplots(len(names), 1, sharex=True, figsize=(9, 1.7 * len(names) + 0.8), squeeze=False)
-    for ax, name in zip(axes[:, 0], names, strict=True):
-        unit = traj.units[traj.names.index(name)]
-        draw = ax.step if name in traj.inputs else ax.plot
-        kwargs = {"where": "post"} if name in traj.inputs else {}
-        draw(traj.time, traj[name], lw=0.8, label=label, **kwargs)
-        for other_label, other in others:
-            if name in other.names:
-                ax.plot(other.time, other[name], lw=0.8, label=other_label)
-        ax.set_ylabel(f"{name}\n[{unit}]" if unit else name, fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
-    if others:
-        axes[0, 0].legend(fontsize=8, loc="upper right")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    return save_figure(fig, path)
+    return save_figure(trajectory_figure(traj, others=others, label=label, title=title), path)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidSettingError, UnknownVariableError
+from ..numbers import check_memory
 from ..plant.fmu_plant import FmuPlant
 from .signals import Signal, parse_signal
 from .trajectory import Trajectory
@@ -143,13 +144,19 @@ def simulate(
     True
     """
     n = steps_for(duration, dt)
-    t = t0 + dt * np.arange(n + 1)
     inputs = dict(inputs or {})
+    # the time, inputs and outputs, and a copy of them in the Trajectory: refused before the FMU loads
+    check_memory(2.0 * (n + 1) * (1 + len(inputs) + len(outputs or ()) + 1), what=f"a simulation of {n + 1:,} "
+                 f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
     with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs) as plant:
         unknown = [name for name in inputs if name not in plant.inputs]
         if unknown:
             raise UnknownVariableError(f"{plant.path.name} has no real input named {unknown[0]!r}; "
                                        f"its inputs are: {', '.join(plant.inputs) or 'none'}")
+        check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
+                     what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
+                     hint="use a larger dt, a shorter duration or fewer outputs")
+        t = t0 + dt * np.arange(n + 1)
         u = np.empty((n + 1, len(plant.inputs)))
         start_values = plant.get(plant.inputs)
         for j, name in enumerate(plant.inputs):

@@ -6,10 +6,12 @@ zero-order held: an input's value at ``time[k]`` is the value applied over ``[ti
 
 Files
 -----
-CSV (``.csv``): a first comment line
-``# cosim-trajectory v1 {"units": {...}, "roles": {...}, "meta": {...}}``, then a header ``time,<name>,...``
-and one row per sample, floats written so that they read back exactly. A spreadsheet opens it (the first line
-shows as a note). Parquet (``.parquet``, ``.pq``): columns ``time``, ``<name>``...
+CSV (``.csv``): a plain table, a header ``time,<name>,...`` and one row per sample, floats written so that
+they read back exactly (``pandas.read_csv``, MATLAB ``readtable`` and spreadsheets read it as is). Units, roles,
+sample time and meta are in the sidecar ``NAME.meta.json``
+(``{"format": "cosim-trajectory", "version": 2, "columns": [...], "units": {...}, "roles": {...},
+"sample_time": ..., "meta": {...}}``); CSVs of cosim < 0.2, with that header as a first comment line
+``# cosim-trajectory v1 {...}``, still read. Parquet (``.parquet``, ``.pq``): columns ``time``, ``<name>``...
 as float64, the same JSON (with ``"version": 1``) under the schema metadata key ``cosim-trajectory``.
 Plain files from other tools (a header with a time column, or a Parquet table) read too; their roles are
 ``"output"`` unless given. Writes are atomic: a temporary file in the same folder, then a rename.
@@ -409,6 +411,59 @@ class Trajectory:
                        "meta": json.loads(json.dumps(self.meta))}
         return frame
 
+    @classmethod
+    def from_pandas(
+        cls,
+        frame: pd.DataFrame,
+        *,
+        time: str | None = None,
+        units: Mapping[str, str] | None = None,
+        roles: Mapping[str, str] | None = None,
+        meta: Mapping[str, Any] | None = None,
+    ) -> Trajectory:
+        """A trajectory from a DataFrame: time from column `time`, else a ``"time"`` column, else the index.
+
+        A datetime or timedelta index counts seconds from its first row. Units, roles and meta default to
+        ``frame.attrs`` (as :meth:`to_pandas` leaves them); every other column must be numeric.
+
+        Examples
+        --------
+        >>> import pandas as pd
+        >>> from cosim.data.trajectory import Trajectory
+        >>> df = pd.DataFrame({"t": [0.0, 0.5], "u": [1.0, 0.0], "y": [0.0, 0.2]})
+        >>> Trajectory.from_pandas(df, time="t", roles={"u": "input"}).roles
+        ('input', 'output')
+        >>> Trajectory.from_pandas(Trajectory.from_arrays([0.0, 1.0], {"y": [1.0, 2.0]},
+        ...                                              units={"y": "m"}).to_pandas()).units
+        ('m',)
+        """
+        from ._trajectory_frames import arrays_from_frame
+
+        t, data, units, roles, meta = arrays_from_frame(frame, time=time, units=units, roles=roles, meta=meta)
+        return cls.from_arrays(t, data, units=units, roles=roles, meta=meta)
+
+    def plot(self, names: str | Sequence[str] | None = None, *, path: str | os.PathLike | None = None,
+             title: str | None = None) -> Any:
+        """A matplotlib Figure of `names` (default: every signal) against time, one panel each, with units.
+
+        Inputs are drawn first, as steps (zero-order hold). With `path`, the figure is also written as PNG.
+
+        Examples
+        --------
+        >>> from cosim.data.trajectory import Trajectory
+        >>> fig = Trajectory.from_arrays([0.0, 1.0], {"y": [1.0, 2.0]}, units={"y": "m"}).plot()
+        >>> fig.axes[0].get_ylabel()
+        'y\\n[m]'
+        """
+        from ._trajectory_figure import trajectory_figure
+
+        fig = trajectory_figure(self if names is None else self.select(names), title=title)
+        if path is not None:
+            from ..figures import save_figure
+
+            save_figure(fig, path, close=False)
+        return fig
+
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready dict: ``time``, ``signals`` (name -> list), ``units``, ``roles``, ``meta``.
 
@@ -435,11 +490,12 @@ class Trajectory:
         >>> traj = Trajectory.from_arrays([0.0, 1.0], {"y": [1.0, 2.0]}, units={"y": "m"})
         >>> path = traj.to_csv(pathlib.Path(tempfile.mkdtemp()) / "run.csv")
         >>> print(path.read_text())
-        # cosim-trajectory v1 {"units": {"y": "m"}, "roles": {"y": "output"}, "meta": {}}
         time,y
         0.0,1.0
         1.0,2.0
         <BLANKLINE>
+        >>> import json; json.loads(path.with_name("run.meta.json").read_text())["units"]
+        {'y': 'm'}
         """
         return write_csv(self, path)
 

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, InvalidSettingError
+from ..numbers import check_memory
 from ._differentiation import _differentiator
 from .terms import Term
 
@@ -38,6 +39,11 @@ def _equations(runs: Sequence[tuple[np.ndarray, np.ndarray]], parsed: Sequence[T
                options: Mapping[str, Any], noise_compensation: bool
                ) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any], np.ndarray | None]:
     """Stack features and targets of every record: (features, targets, N_eff, meta, noise variance or None)."""
+    samples = sum(len(x) for x, _ in runs)
+    # the term matrix, its integrals and a least-squares copy: refused up front on a machine too small for them
+    check_memory(4.0 * samples * (len(parsed) + len(state_names)),
+                 what=f"identifying {len(parsed)} terms on {samples:,} samples",
+                 hint="decimate the record (decimate=N, --decimate N), shorten it, or use a smaller library")
     meta: dict[str, Any] = {"method": method}
     feats, targs = [], []
     noise_var = None

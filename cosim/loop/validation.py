@@ -6,16 +6,19 @@
   ``step:amp=0.01,at=0.05,duration=2``.
 * :class:`Spec` - a requirement on one figure of :class:`~cosim.loop.closed_loop.ClosedLoopResult`, written
   ``settling_time<=0.5``, ``overshoot<=10%``, ``steady_state_error<=2e-5``, ``input_limit<=5000``,
-  ``deadline_miss_rate<=0.001``, ``solve_time_p99<=50us``; any metric name works.
+  ``deadline_miss_rate<=0.001``, ``solve_time_p99<=50us``; a metric name not in :data:`KNOWN_METRICS`
+  (nor one of them prefixed by a tracked signal, ``theta_L.settling_time``) is refused before anything runs.
 * :func:`validate` runs every scenario and checks every spec: :class:`Verdict` (``passed``, ``reasons``,
   ``metrics``, ``solve_time_us``); :meth:`Verdict.assert_passed` raises an ``AssertionError`` listing what
   failed, which pytest prints; :func:`assert_meets` does both in one call.
 
 Default specs for a telescope axis (:data:`TELESCOPE_SPECS`), for a 0.01 rad (34 arcmin) load-angle step at
 2257 Hz with the rated torque of 5000 N m: settling to 2 % within 1 s, overshoot at most 10 %, steady-state
-error at most 2e-5 rad (4 arcsec, averaged over the last 10 % of the run), the torque limit never exceeded,
-and at most 0.1 % of controller calls over the sample period (a desktop OS preempts now and then; a real-time
-target would ask for 0). They are a small offset-pointing move of a telescope of this size; tighten them for
+error at most 2e-5 rad (4 arcsec, averaged over the last 10 % of the run), the torque limit never exceeded.
+They are control specs only, so that a verdict does not depend on the machine's load: the controller's
+compute time is measured and reported (``solve_time_us``, ``deadline_miss_rate``), and becomes a verdict only
+when a timing spec is asked for (``deadline_miss_rate<=0``, ``solve_time_p99<=50us``; :data:`TIMING_SPECS`
+is a desktop's allowance). They are a small offset-pointing move of a telescope of this size; tighten them for
 a real instrument.
 
 Examples
@@ -42,8 +45,10 @@ from .closed_loop import ClosedLoopResult, closed_loop
 from .response import jsonable_metrics
 
 __all__ = [
+    "KNOWN_METRICS",
     "SCENARIO_KINDS",
     "TELESCOPE_SPECS",
+    "TIMING_SPECS",
     "Scenario",
     "Spec",
     "Verdict",
@@ -57,8 +62,14 @@ __all__ = [
 ]
 
 SCENARIO_KINDS = ("step", "ramp", "disturbance")
-TELESCOPE_SPECS = ("settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000",
-                   "deadline_miss_rate<=0.001")
+TELESCOPE_SPECS = ("settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000")
+#: A timing allowance for a desktop OS that preempts now and then (a real-time target would ask for 0).
+TIMING_SPECS = ("deadline_miss_rate<=0.001",)
+#: Figures a spec can name (ClosedLoopResult.metrics); the response's may be prefixed by a tracked signal's name.
+RESPONSE_METRICS = ("rise_time", "settling_time", "overshoot_pct", "iae", "steady_state_error", "final_error_max",
+                    "peak_error", "step", "model_discrepancy_rms", "model_discrepancy_pct")
+KNOWN_METRICS = (*RESPONSE_METRICS, "input_peak", "constraint_violations", "deadline_misses", "deadline_miss_rate",
+                 "solve_time_median_us", "solve_time_p99_us", "solve_time_max_us", "realtime_factor")
 
 # Spec names that are not metric keys, and the metric they mean.
 _ALIASES = {"overshoot": "overshoot_pct", "input_limit": "input_peak", "deadline": "deadline_misses",
@@ -277,6 +288,13 @@ def parse_spec(text: str | Spec) -> Spec:
         raise SpecError(f"cannot read spec {text!r}; write metric<=limit, e.g. settling_time<=0.5 or overshoot<=10%")
     name, op, number, unit = match.groups()
     metric = _ALIASES.get(name, name)
+    prefix, _, last = metric.rpartition(".")
+    last = _ALIASES.get(last, last)
+    metric = f"{prefix}.{last}" if prefix else last
+    if last not in KNOWN_METRICS or (prefix and last not in (*RESPONSE_METRICS, "input_peak")):
+        known = ", ".join(sorted({*KNOWN_METRICS, *_ALIASES}))
+        raise SpecError(f"spec {raw!r} names an unknown metric {name!r}; known: {known} (a response metric may "
+                        "be prefixed by its tracked signal, e.g. theta_L.settling_time)")
     try:
         limit = parse_number(number, what=f"limit of spec {raw!r}")
     except ValueError as exc:
