@@ -24,6 +24,7 @@ checks the heaviest). Module paths of the flat layout before the rooms (``cosim.
 """
 
 import logging
+from typing import TYPE_CHECKING
 
 from . import _moved
 from .data import signals
@@ -49,10 +50,31 @@ from .plant.model_description import open_model_description
 
 __version__ = "0.1.0"
 
+if TYPE_CHECKING:
+    # The lazy names of _LAZY, from the modules that define them, so that IDEs and type checkers see them; never
+    # imported at runtime (``__getattr__`` below does that on first use). ``X as X`` marks a re-export (PEP 484).
+    # tests/test_public_api.py checks that this block and _LAZY name the same objects.
+    from .diagnose.residuals import ResidualAnalysis as ResidualAnalysis
+    from .export import export as export
+    from .export.statespace import to_statespace as to_statespace
+    from .identify.compare import Comparison as Comparison
+    from .identify.compare import compare as compare
+    from .identify.model import IdentifiedModel as IdentifiedModel
+    from .identify.model import SimulationResult as SimulationResult
+    from .identify.sindyc import SINDYc as SINDYc
+    from .loop.closed_loop import ClosedLoopResult as ClosedLoopResult
+    from .loop.validation import Verdict as Verdict
+    from .loop.validation import validate as validate
+    from .study.reproduce import reproduce_paper as reproduce_paper
+    from .study.sweep import run_sweep as run_sweep
+    from .study.sweep_result import SweepResult as SweepResult
+
 _LAZY = {  # name -> the room that exports it
     "SINDYc": "identify",
     "IdentifiedModel": "identify",
     "SimulationResult": "identify",
+    "compare": "identify",
+    "Comparison": "identify",
     "to_statespace": "export",
     "export": "export",
     "run_sweep": "study",

@@ -53,7 +53,7 @@ def check_memory(n_values: float, *, what: str, hint: str, fraction: float = MEM
     >>> check_memory(1e20, what="a simulation of 1e20 values", hint="use a larger dt")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    cosim.errors.InvalidSettingError: a simulation of 1e20 values needs 8e+11 GB, more than 50% of the...; use a larger dt
+    cosim.errors.InvalidSettingError: a simulation of 1e20 values needs 8e+11 GB, more than 50% of ...; use a larger dt
     """
     available = available_memory()
     need = 8.0 * float(n_values)

@@ -129,6 +129,134 @@ def test_time_jitter_is_regularised_to_a_uniform_grid(tmp_path):
     assert traj.is_uniform()
 
 
+# ------------------------------------------------------------------------------------------- matrix variables
+
+
+def channels(n: int = N) -> np.ndarray:
+    """Time then three channels, one per column, as a rig saves them (n x 4)."""
+    s = signals(n)
+    return np.column_stack([s["t"], s["qm"], s["vir"], s["pulses_N"].astype(float)])
+
+
+def test_mat_matrix_columns_equal_the_source_columns(tmp_path):
+    data = channels()
+    path = tmp_path / "rig.mat"
+    scipy.io.savemat(path, {"t": data[:, 0], "data": data})
+    traj = load_data(path, columns=["pos=data[:,1]", "volts=data[:, 2]", "pulses=data[ : , 3 ]"])
+    assert traj.names == ("pos", "volts", "pulses")
+    for k, name in enumerate(traj.names, start=1):
+        np.testing.assert_array_equal(traj[name], data[:, k])  # exactly the stored column, 0-based
+    assert traj.meta["data_file"]["columns"] == {"pos": "data[:,1]", "volts": "data[:, 2]",
+                                                 "pulses": "data[ : , 3 ]"}
+    mapping = load_data(path, columns={"pos": "data[:,1]"})
+    np.testing.assert_array_equal(mapping["pos"], data[:, 1])
+
+
+def test_mat_matrix_stored_with_channels_as_rows(tmp_path):
+    rows = channels().T  # 4 x N
+    path = tmp_path / "rows.mat"
+    scipy.io.savemat(path, {"t": rows[0], "data": rows})
+    traj = load_data(path, columns=["pos=data[1,:]", "volts=data[2, :]"])
+    np.testing.assert_array_equal(traj["pos"], rows[1])
+    np.testing.assert_array_equal(traj["volts"], rows[2])
+    # the other way round, the message says which way the channels run
+    with pytest.raises(DataError, match=r"^data\[:,1\]: data is 4 x 400: its rows are the channels .* "
+                                        r"write data\[1,:\] \(indices are 0-based"):
+        load_data(path, columns=["pos=data[:,1]"])
+
+
+def test_mat_expression_with_indexed_variables(tmp_path):
+    data = channels()
+    path = tmp_path / "rig.mat"
+    scipy.io.savemat(path, {"t": data[:, 0], "data": data, "gain": 2.0})
+    traj = load_data(path, columns=["force=35.15*data[:,2]", "mix=gain*(data[:,1] - data[:, 3])/4"],
+                     roles={"force": "input"})
+    np.testing.assert_allclose(traj["force"], 35.15 * data[:, 2], rtol=1e-15)
+    np.testing.assert_allclose(traj["mix"], 2.0 * (data[:, 1] - data[:, 3]) / 4, rtol=1e-15)
+    assert traj.meta["data_file"]["scalars"] == {"gain": 2.0}
+    # a vector takes index 0, whichever way it is stored (savemat writes a 1-D array as a 1 x N row)
+    scipy.io.savemat(path, {"t": data[:, 0], "v": data[:, 1], "w": data[:, 2][:, None]})
+    vectors = load_data(path, columns=["a=v[:,0]", "b=v[0,:]", "c=w[:,0]"])
+    for name, source in (("a", 1), ("b", 1), ("c", 2)):
+        np.testing.assert_array_equal(vectors[name], data[:, source])
+
+
+def test_mat_time_from_an_indexed_column(tmp_path):
+    data = channels()
+    path = tmp_path / "rig.mat"
+    scipy.io.savemat(path, {"data": data, "rows": data.T})
+    traj = load_data(path, time="data[:, 0]", columns=["pos=data[:,1]"], derive=["pos"])
+    np.testing.assert_array_equal(traj.time, data[:, 0])
+    np.testing.assert_array_equal(traj["pos"], data[:, 1])
+    assert traj.names == ("pos", "pos_dot") and traj.dt == pytest.approx(DT)
+    assert traj.meta["data_file"]["time"] == "data[:,0]"
+    by_row = load_data(path, time="rows[0,:]", columns=["volts=rows[2,:]"])
+    np.testing.assert_array_equal(by_row.time, data[:, 0])
+    np.testing.assert_array_equal(by_row["volts"], data[:, 2])
+    with pytest.raises(UnknownVariableError, match=r"rig.mat has no variable 'dat' \(time 'dat\[:,0\]'\)"):
+        load_data(path, time="dat[:,0]", columns=["pos=data[:,1]"])
+    with pytest.raises(DataError, match=r"has no vector of 400 samples besides 'data\[:,0\]'.*"
+                                        r"columns=\['x=data\[:,1\]'\]"):
+        load_data(path, time="data[:,0]")
+
+
+@pytest.mark.parametrize(("time", "column", "message"), [
+    ("data[:,0]", "pos=data[:,7]", "data[:,7]: data is 400 x 4, column index must be 0..3"),
+    ("data[:,0]", "pos=data[:,-1]", "data[:,-1]: data is 400 x 4, column index must be 0..3"),
+    ("data[:,0]", "pos=rows[9,:]", "rows[9,:]: rows is 4 x 400, row index must be 0..3"),
+    ("data[:,4]", "pos=data[:,1]", "data[:,4]: data is 400 x 4, column index must be 0..3"),
+    ("data[:,0]", "pos=2*v[:,1]", "v[:,1]: v is 1 x 400, a vector: column index must be 0"),
+])
+def test_mat_index_out_of_range_is_one_line(tmp_path, time, column, message):
+    data = channels()
+    path = tmp_path / "rig.mat"
+    scipy.io.savemat(path, {"data": data, "rows": data.T, "v": data[:, 1]})
+    with pytest.raises(DataError) as caught:
+        load_data(path, time=time, columns=[column])
+    text = str(caught.value)
+    assert text == f"{message} (indices are 0-based, as in NumPy; file rig.mat)"
+    assert "\n" not in text
+
+
+@pytest.mark.parametrize(("column", "message"), [
+    ("pos=data[0]", r"'data\[0\]' is not allowed; index a .mat matrix as data\[:,k\] \(its column k\) or "
+                    r"data\[k,:\] \(its row k\), k a whole number; indices are 0-based"),
+    ("pos=data[:,1:3]", r"'data\[:, 1:3\]' is not allowed"),
+    ("pos=data[:,1.0]", r"'data\[:, 1.0\]' is not allowed"),
+    ("pos=data[:,:]", r"'data\[:, :\]' is not allowed"),
+    ("pos=(2*data)[:,1]", r"'\(2 \* data\)\[:, 1\]' is not allowed"),
+])
+def test_mat_malformed_index_is_refused(mat, column, message):
+    with pytest.raises(InvalidSettingError, match=message):
+        load_data(mat, columns=[column])
+
+
+def test_indexing_a_csv_or_parquet_column_is_refused(csv, tmp_path):
+    with pytest.raises(DataError, match=r"^column 'p=2\*qm\[:,0\]': qm\[:,0\] indexes 'qm' as a matrix, but "
+                                        r"bench.csv is a CSV file, whose columns are vectors \(only a .mat variable "
+                                        r"can be a matrix; indices are 0-based, as in NumPy\); use the column by "
+                                        r"name, qm$"):
+        load_data(csv, columns=["p=2*qm[:,0]"])
+    with pytest.raises(DataError, match=r"^time 't\[:,0\]': t\[:,0\] indexes 't' as a matrix, but bench.csv"):
+        load_data(csv, time="t[:,0]", columns=["qm"])
+    pq = tmp_path / "b.parquet"
+    pd.DataFrame({"time": [0.0, 1.0, 2.0], "y": [1.0, 2.0, 3.0]}).to_parquet(pq)
+    with pytest.raises(DataError, match="b.parquet is a Parquet file, whose columns are vectors"):
+        load_data(pq, columns=["z=y[:,0]"])
+
+
+def test_a_whole_matrix_or_an_unnamed_index_says_how_to_index(tmp_path):
+    data = channels()
+    path = tmp_path / "rig.mat"
+    scipy.io.savemat(path, {"t": data[:, 0], "data": data})
+    with pytest.raises(DataError, match=r"has shape \(400, 4\); expected a vector .*; index a .mat matrix as "
+                                        r"data\[:,k\]"):
+        load_data(path, columns=["pos=data"])
+    with pytest.raises(UnknownVariableError, match=r"no variable 'data\[:,1\]'.*; to read one column of the "
+                                                   r"matrix data, name it: x=data\[:,1\] \(indices are 0-based\)"):
+        load_data(path, columns=["data[:,1]"])
+
+
 # ------------------------------------------------------------------------------------------- derivatives
 
 

@@ -8,7 +8,9 @@ objects as the room that holds them now.
 
 from __future__ import annotations
 
+import ast
 import importlib
+import importlib.resources
 import json
 import subprocess
 import sys
@@ -70,3 +72,79 @@ def test_export_is_the_function_and_the_room():
     from cosim import export
 
     assert callable(export)
+
+
+# ------------------------------------------------------------------------------ for IDEs and type checkers
+INIT = Path(__file__).parents[1] / "cosim" / "__init__.py"
+
+
+def _type_checking_imports() -> dict[str, str]:
+    """Name -> absolute module of each import in the ``if TYPE_CHECKING:`` block of cosim/__init__.py."""
+    tree = ast.parse(INIT.read_text(encoding="utf-8"))
+    blocks = [node for node in tree.body if isinstance(node, ast.If) and isinstance(node.test, ast.Name)
+              and node.test.id == "TYPE_CHECKING"]
+    assert len(blocks) == 1, "cosim/__init__.py has no `if TYPE_CHECKING:` block at module level"
+    imports = {}
+    for node in blocks[0].body:
+        assert isinstance(node, ast.ImportFrom) and node.level == 1, ast.unparse(node)
+        for alias in node.names:
+            # `X as X`: the explicit re-export that strict checkers (mypy --no-implicit-reexport, pyright) want
+            assert alias.asname == alias.name, ast.unparse(node)
+            imports[alias.name] = f"cosim.{node.module}"
+    return imports
+
+
+def _runtime_imports() -> set[str]:
+    """Names that cosim/__init__.py binds with a module-level import, run at ``import cosim``."""
+    tree = ast.parse(INIT.read_text(encoding="utf-8"))
+    return {alias.asname or alias.name for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))
+            for alias in node.names}
+
+
+def test_every_public_name_is_visible_to_type_checkers():
+    import cosim
+
+    static = _type_checking_imports()
+    # what `import cosim` does not import (the lazy names) is exactly what the TYPE_CHECKING block imports
+    assert set(cosim.__all__) - _runtime_imports() == set(static) == set(cosim._LAZY)
+    assert set(static) <= set(cosim.__all__)
+
+
+@pytest.mark.parametrize("name", sorted(_type_checking_imports()))
+def test_the_type_checking_imports_are_what_runs(name):
+    import cosim
+
+    module = _type_checking_imports()[name]
+    expected = getattr(importlib.import_module(module), name)
+    value = getattr(cosim, name)
+    # cosim.export is also a room: once imported, Python binds the name to the (callable) module
+    assert value is expected or getattr(value, name, None) is expected
+
+
+def test_every_public_name_resolves():
+    import cosim
+
+    assert [name for name in cosim.__all__ if getattr(cosim, name, None) is None] == []
+
+
+def test_the_type_checking_block_imports_nothing_at_runtime():
+    code = ("import json, sys, cosim\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] in ([\"cosim\", r] for r in "
+            "('identify', 'export', 'diagnose', 'loop', 'study')))))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == []
+
+
+# ------------------------------------------------------------------------------------------------ py.typed
+@pytest.mark.parametrize("package", TOP_LEVEL)
+def test_the_packages_are_marked_typed(package):
+    marker = importlib.resources.files(package) / "py.typed"
+    assert marker.is_file() and marker.read_text() == ""
+
+
+def test_the_typed_markers_go_into_the_wheel():
+    tomllib = pytest.importorskip("tomllib")
+    config = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text(encoding="utf-8"))
+    package_data = config["tool"]["setuptools"]["package-data"]
+    assert all("py.typed" in package_data.get(package, []) for package in TOP_LEVEL), package_data

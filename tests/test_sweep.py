@@ -156,7 +156,7 @@ def test_keyboard_interrupt_stops_the_sweep():
 
 
 def test_progress_bar_on_stderr(capsys):
-    run_sweep(_example_case, CASES, workers=1, desc="noise sweep")
+    run_sweep(_example_case, CASES, workers=1, desc="noise sweep", progress=True)  # stderr is no terminal here
     captured = capsys.readouterr()
     assert captured.out == ""
     assert "noise sweep" in captured.err and "5/5" in captured.err and "failed=1" in captured.err

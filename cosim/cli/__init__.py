@@ -9,6 +9,7 @@ One module per command group, each importing the rooms it drives only when its c
 * :mod:`~cosim.cli.fmu` - ``cosim fmu build``, ``cosim fmu info``;
 * :mod:`~cosim.cli.simulate` - ``cosim simulate``, ``cosim data info``;
 * :mod:`~cosim.cli.identify` - ``cosim identify``;
+* :mod:`~cosim.cli.compare` - ``cosim compare``;
 * :mod:`~cosim.cli.export` - ``cosim export``;
 * :mod:`~cosim.cli.design` - ``cosim design pid``, ``cosim design mpc``;
 * :mod:`~cosim.cli.validate` - ``cosim validate``;
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import click
 
-from . import demo, design, diagnose, export, fmu, identify, reproduce, simulate, validate
+from . import compare, demo, design, diagnose, export, fmu, identify, reproduce, simulate, validate
 
 __all__ = ["main"]
 
@@ -43,6 +44,7 @@ main.add_command(fmu.fmu)
 main.add_command(simulate.simulate)
 main.add_command(simulate.data)
 main.add_command(identify.identify_command)
+main.add_command(compare.compare_command)
 main.add_command(export.export_command)
 main.add_command(design.design)
 main.add_command(validate.validate_command)

@@ -100,9 +100,23 @@ def _resolve_fmu(path: str) -> Path:
     return Path(path)
 
 
+def _split(text: str) -> list[str]:
+    """`text` split at its commas outside brackets: ``"a,pos=data[:,2]"`` -> ["a", "pos=data[:,2]"]."""
+    items, depth, current = [], 0, []
+    for char in text:
+        depth += {"[": 1, "(": 1, "]": -1, ")": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            items.append("".join(current))
+            current = []
+        else:
+            current.append(char)
+    return [*items, "".join(current)]
+
+
 def _names(text: str, option: str) -> list[str]:
-    """``"theta_m, omega_m"`` -> ["theta_m", "omega_m"]; at least one name."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
+    """``"theta_m, omega_m"`` -> ["theta_m", "omega_m"] (commas inside brackets kept: ``pos=data[:,2]``); at
+    least one name."""
+    names = [n.strip() for n in _split(text) if n.strip()]
     if not names:
         raise InvalidSettingError(f"{option} takes comma-separated column names, got {text!r}")
     return names

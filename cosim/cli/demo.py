@@ -13,9 +13,11 @@ __all__ = ["demo"]
 @click.option("--out-dir", "--out", "out_dir", default="cosim-demo", show_default=True,
               type=click.Path(file_okay=False),
               help="Folder for the results.")
+@click.option("--progress/--no-progress", default=None,
+              help="Progress bars on stderr (default: only when stderr is a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
-def demo(out_dir: str, as_json: bool) -> None:
+def demo(out_dir: str, progress: bool | None, as_json: bool) -> None:
     """Run the main job on the bundled servo FMU and write its results (data, models, controllers, plots, one
     HTML report) to --out-dir: a linear model of friction-laden noisy data, the diagnosis of the friction it lacks,
     PID and MPC designed on each model and validated on the FMU.
@@ -26,5 +28,5 @@ def demo(out_dir: str, as_json: bool) -> None:
     """
     from ..demo import run_demo, summary_lines
 
-    result = run_demo(out_dir)
+    result = run_demo(out_dir, progress=progress)
     _emit(as_json, result, "\n".join(summary_lines(result)))

@@ -9,6 +9,7 @@ import click
 from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
 from ._command import _decimate_option, _emit, _friendly, _names, _pairs
+from ._data_options import data_options, derive_option, read_records
 
 __all__ = ["DIAGNOSE_MIN_SAMPLES", "diagnose_command"]
 
@@ -27,17 +28,10 @@ DIAGNOSE_MIN_SAMPLES = 200
               help="The model to diagnose (cosim model JSON); default: identify a linear SINDYc model first.")
 @click.option("--effects", default="all", show_default=True, metavar="all|NAME,...",
               help="Which catalogued effects to try.")
-@click.option("--derive", default=None, metavar="POS,...",
-              help="Derive velocities <POS>_dot from measured positions (Savitzky-Golay, window chosen from the "
-                   "data's noise and bandwidth).")
-@click.option("--derive-window", "derive_window", default=None, type=click.IntRange(3), metavar="N",
-              help="Samples in the derivative's window (odd) instead of the one chosen from the data.")
 @click.option("--kinematics", default="auto", show_default=True, metavar="auto|none|POS=VEL,...",
               help="Rows d(POS)/dt = VEL pinned in the identified model: found from the names and the data "
                    "(auto), none, or given, e.g. theta_m=omega_m,theta_L=omega_L. Effects on velocities need them.")
-@click.option("--time", "time_column", default=None, help="Name of the time column (default t, else time).")
-@click.option("--resample", is_flag=True,
-              help="Interpolate a record whose time steps are not uniform onto a uniform grid instead of refusing it.")
+@data_options
 @click.option("--max-effects", default=3, show_default=True, type=click.IntRange(1, 10), help="Most effects added.")
 @click.option("--x0", "initial_state", type=click.Choice(["estimate", "measured"]), default="estimate",
               show_default=True,
@@ -58,9 +52,8 @@ DIAGNOSE_MIN_SAMPLES = 200
               help='Print {"effects": [{"name", "attached_to", "parameters"}...], "before": {...}, "after": {...}}.')
 @_friendly
 def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, model_path: str | None, effects: str,
-                     derive: str | None, derive_window: int | None, kinematics: str, time_column: str | None,
-                     resample: bool,
-                     max_effects: int, initial_state: str, noise: str | None, decimate: str,
+                     kinematics: str, derive: str | None, derive_window: int | None, time_column: str | None,
+                     resample: bool, max_effects: int, initial_state: str, noise: str | None, decimate: str,
                      report_path: str | None,
                      out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
@@ -75,7 +68,6 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
       cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --json
       cosim diagnose run1.csv run2.csv --state x,v --input u
     """
-    from ..data.datafile import load_data
     from ..diagnose.diagnosis import BASE_SETTINGS, diagnose
     from ..diagnose.effects import effect_selection
     from ..identify.model import IdentifiedModel
@@ -84,20 +76,14 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
 
     state_names, input_specs = _names(states, "--state"), _names(inputs, "--input")
     input_names = [spec.partition("=")[0].strip() for spec in input_specs]
-    derived = _names(derive, "--derive") if derive else []
-    derived_names = {f"{p}_dot" for p in derived}
-    columns = [n for n in state_names if n not in derived_names] + input_specs
-    roles = {**dict.fromkeys(state_names, "state"), **dict.fromkeys(input_names, "input")}
+    derived = derive_option(derive)
     known = _kinematics_option(kinematics, state_names)
-    records = []
-    for path in data_paths:
-        data = load_data(path, time=time_column, columns=columns, roles=roles, derive=derived, resample=resample,
-                         derive_window=derive_window)
-        data = data.select([*state_names, *input_names])
+    records = read_records(data_paths, states=state_names, inputs=input_specs, derive=derived, time=time_column,
+                           derive_window=derive_window, resample=resample)
+    for path, data in zip(data_paths, records, strict=True):
         if len(data) < DIAGNOSE_MIN_SAMPLES:  # before identifying: its own minimum would name a library option
             raise DataError(f"{Path(path).name} has {len(data)} samples; diagnosis needs at least "
                             f"{DIAGNOSE_MIN_SAMPLES}; use a longer record")
-        records.append(data)
     selection = effect_selection(effects)  # names checked now; fixed values against the data in diagnose()
     factor = _decimate_option(decimate)
     found_rows = ""
@@ -105,7 +91,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
         model = IdentifiedModel.load(model_path)
     else:
         if isinstance(known, dict):
-            known = {**{p: f"{p}_dot" for p in derived if p in state_names and f"{p}_dot" in state_names}, **known}
+            known = {**{p: v for v, p in derived.items() if p in state_names and v in state_names}, **known}
         estimator = SINDYc(**{**BASE_SETTINGS, "kinematics": known, "decimate": factor}).fit(
             records, states=state_names, inputs=input_names)
         model, found_rows = estimator.model_, format_kinematics(estimator.kinematics_)

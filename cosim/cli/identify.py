@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 import click
-import numpy as np
 
 from ..numbers import parse_number
 from ._command import _decimate_option, _emit, _friendly, _names, _pairs
+from ._data_options import data_options, derive_option, read_records
 
 __all__ = ["identify_command", "parse_kinematics_option", "format_kinematics"]
 
@@ -46,8 +48,10 @@ def format_kinematics(pairs: tuple) -> str:
 
 @click.command("identify")
 @click.argument("data", metavar="DATA")
-@click.option("--state", "states", required=True, metavar="A,B,...", help="State columns, in order.")
-@click.option("--input", "inputs", default="", metavar="U,...", help="Input columns (none for an autonomous model).")
+@click.option("--state", "states", required=True, metavar="A,B,...",
+              help="State columns, in order (NAME=EXPR for an expression of the file's variables).")
+@click.option("--input", "inputs", default="", metavar="U,...",
+              help="Input columns (none for an autonomous model; NAME=EXPR, e.g. force=35.15*vir).")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), help="Write the model as JSON.")
 @click.option("--library", type=click.Choice(["linear", "polynomial"]), default="linear", show_default=True,
               help="Candidate terms: constant, states and inputs (the study's), or polynomials up to --degree.")
@@ -63,27 +67,24 @@ def format_kinematics(pairs: tuple) -> str:
 @click.option("--kinematics", default="auto", show_default=True, metavar="auto|none|POS=VEL,...",
               help="Rows d(POS)/dt = VEL fixed exactly: detected from names and data (auto), none, or given, "
                    "e.g. theta_m=omega_m,theta_L=omega_L.")
-@click.option("--derive", default=None, metavar="VEL=POS,...",
-              help="Derive velocity states from measured positions, e.g. omega_m=theta_m.")
-@click.option("--derive-window", type=int, default=None, metavar="N",
-              help="Savitzky-Golay window of derived velocities in samples (odd); default chosen from the data.")
+@data_options
 @click.option("--allow-unstable", is_flag=True,
               help="Keep an unstable identified model (with a warning) instead of failing with exit status 1.")
 @click.option("--decimate", default="auto", show_default=True, metavar="auto|N",
               help="Refine on the record's step times N (states low-pass filtered, inputs averaged), then once more "
                    "at its own step; auto: down to ten times the record's band on records of more than 4000 "
                    "samples; 1: never.")
-@click.option("--time", "time_column", default="time", show_default=True, help="Name of the time column [s].")
 @click.option("--json", "as_json", is_flag=True, help="Print the model, equations and fit as JSON.")
 @_friendly
 def identify_command(data: str, states: str, inputs: str, out: str | None, library: str, degree: int, terms: str,
                      threshold: str, differentiation: str, refine: bool, kinematics: str, derive: str | None,
-                     derive_window: int | None, allow_unstable: bool, decimate: str, time_column: str,
-                     as_json: bool) -> None:
+                     derive_window: int | None, time_column: str | None, resample: bool, allow_unstable: bool,
+                     decimate: str, as_json: bool) -> None:
     """Identify a SINDYc model from a data file (CSV or Parquet) and print its equations and fit.
 
-    The fit is the free-run simulation of the model from the first sample, with the measured inputs held
-    between samples, against the measured states: R² and NRMSE fit % per state. Kinematic rows
+    The fit is `cosim compare`'s on the same data: the model's free run with the measured inputs held between
+    samples, from an initial state estimated from the data, against the measured states: fit_pct (MATLAB's
+    NRMSE fit, 100 is perfect), nrmse_pct (the error, 0 is perfect) and R² per state. Kinematic rows
     (position' = velocity) are found from the state names and the data unless --kinematics says otherwise,
     and printed. An unstable model is an error (exit status 1, nothing written) unless --allow-unstable.
 
@@ -91,15 +92,15 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
     Example:
       cosim identify data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm -o model.json
     """
-    from ..data.trajectory import Trajectory
-    from ..identify.metrics import nrmse_fit_pct, r2
+    from ..identify.compare import compare
     from ..identify.sindyc import IdentificationWarning, SINDYc
 
-    state_names, input_names = _names(states, "--state"), _names(inputs, "--input") if inputs else []
-    derived = {k: str(v) for k, v in _pairs(tuple(derive.split(",")), "--derive").items()} if derive else {}
-    columns = list(dict.fromkeys([n for n in state_names if n not in derived] + list(derived.values())
-                                 + input_names))
-    traj = Trajectory.read(data, columns=columns, time=time_column)
+    state_specs, input_specs = _names(states, "--state"), _names(inputs, "--input") if inputs else []
+    state_names = [s.partition("=")[0].strip() for s in state_specs]
+    input_names = [s.partition("=")[0].strip() for s in input_specs]
+    derived = derive_option(derive)
+    [traj] = read_records([data], states=state_specs, inputs=input_specs, derive=derived, time=time_column,
+                          resample=resample, differentiate=False)
     estimator = SINDYc(library=library, degree=degree, terms=[t for t in terms.split(";") if t.strip()],
                        threshold=threshold if threshold == "auto" else parse_number(threshold, what="--threshold"),
                        differentiation=differentiation, kinematics=parse_kinematics_option(kinematics),
@@ -111,22 +112,18 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
         estimator.fit(traj, states=state_names, inputs=input_names)
     notes = [f"warning: {w.message}" for w in caught if issubclass(w.category, IdentificationWarning)]
     model = estimator.model_
-    x0 = model.meta.get("x0")
-    start = np.asarray(x0[0] if x0 and isinstance(x0[0], list) else x0) if x0 else None
-    sim = estimator.simulate(start if start is not None else [traj[s][0] for s in model.states],
-                             traj[list(model.inputs)][:-1] if model.inputs else None, dt=traj.dt)
-    fit = {}
-    if all(s in traj.names for s in model.states) and sim.ok:
-        measured = traj[list(model.states)]
-        fit = {"r2": dict(zip(model.states, np.atleast_1d(r2(measured, sim.states)).tolist(), strict=True)),
-               "nrmse_pct": dict(zip(model.states, np.atleast_1d(nrmse_fit_pct(measured, sim.states)).tolist(),
-                                     strict=True))}
+    fit: dict[str, Any] = {}
+    status = "ok"
+    if all(s in traj.names for s in model.states):
+        scores = compare(model, traj)
+        status = "ok" if all(math.isfinite(v) for v in scores.fit_pct.values()) else "diverged"
+        fit = {key: getattr(scores, key) for key in ("fit_pct", "nrmse_pct", "r2")} if status == "ok" else {}
     if out:
         model.save(out)
     windows = model.meta["data"].get("derive_window") or {}
     payload = {"model": str(Path(out).resolve()) if out else None, "equations": model.equations(),
                "states": list(model.states), "inputs": list(model.inputs), "threshold": estimator.threshold_,
-               "stable": model.meta.get("stable"), "simulation": sim.status, "fit": fit,
+               "stable": model.meta.get("stable"), "simulation": status, "fit": fit,
                "kinematics": [p.to_dict() for p in estimator.kinematics_], "derive_window": windows,
                "warnings": [n.removeprefix("warning: ") for n in notes]}
     lines = model.equations() + [format_kinematics(estimator.kinematics_)]
@@ -135,11 +132,11 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
         lines.append("derived: " + ", ".join(f"{v} from {derived[v]} (Savitzky-Golay window {w} samples, {how})"
                                              for v, w in windows.items()))
     if fit:
-        lines.append("free-run fit: " + ", ".join(f"{s} R2={fit['r2'][s]:.5f} NRMSE={fit['nrmse_pct'][s]:.2f} %"
+        lines.append("free-run fit: " + ", ".join(f"{s} {fit['fit_pct'][s]:.2f} % (R2 {fit['r2'][s]:.5f})"
                                                   for s in model.states))
     lines += notes
-    if not sim.ok:
-        lines.append(f"warning: {sim.message}")
+    if status != "ok":
+        lines.append("warning: the model's free run leaves its range on these data (diverged)")
     if out:
         lines.append(f"wrote {out}")
     _emit(as_json, payload, "\n".join(lines))

@@ -30,11 +30,12 @@ def reproduce() -> None:
               help="Comma-separated subset of the study's noise levels, e.g. 0,0.1,0.5.")
 @click.option("--excitation", "excitations", type=click.Choice(["square", "sine"]), multiple=True,
               help="Restrict to one excitation (default: both).")
-@click.option("--progress/--no-progress", default=True, help="Progress bar on stderr.")
+@click.option("--progress/--no-progress", default=None,
+              help="Progress bar on stderr (default: only when stderr is a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @_friendly
 def reproduce_paper_command(seeds: int, scheduler: str | None, workers: int | None, out_dir: str,
-                            noise_levels: str | None, excitations: tuple[str, ...], progress: bool,
+                            noise_levels: str | None, excitations: tuple[str, ...], progress: bool | None,
                             as_json: bool) -> None:
     """The reference study's simulation results on the bundled FMU, beside its published numbers.
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
+import numpy as np
 
+from ..errors import InvalidSettingError
 from ..numbers import parse_number
 from ._command import _emit, _friendly, _pairs, _resolve_fmu
 
@@ -17,8 +19,16 @@ __all__ = ["data", "simulate"]
 @click.option("--input", "-i", "inputs", multiple=True, metavar="NAME=SPEC",
               help="Input signal, e.g. Tm=square:amp=0.1,freq=2 (amp: fraction of the input's declared max). "
                    "Kinds: square, sine, prbs, chirp, multisine, step, const, or a number.")
-@click.option("--duration", required=True, help="Length of the run [s].")
-@click.option("--dt", required=True, help="Communication step [s], e.g. 1/2257.")
+@click.option("--input-file", "input_file", type=click.Path(dir_okay=False), default=None, metavar="DATA",
+              help="Drive the FMU's inputs from a recorded file (CSV, Parquet, .mat): every column named as an FMU "
+                   "input; --dt and --duration default to the file's.")
+@click.option("--hold", type=click.Choice(["zoh", "linear"]), default="zoh", show_default=True,
+              help="Recorded inputs between their samples: held (zero-order hold, cosim's convention) or "
+                   "interpolated linearly.")
+@click.option("--time", "time_column", default=None, metavar="COLUMN",
+              help="Time column of --input-file (default t, else time).")
+@click.option("--duration", default=None, help="Length of the run [s] (required without --input-file).")
+@click.option("--dt", default=None, help="Communication step [s], e.g. 1/2257 (required without --input-file).")
 @click.option("--set", "sets", multiple=True, metavar="NAME=VALUE", help="Parameter value, e.g. Fc=0.3.")
 @click.option("--start", "starts", multiple=True, metavar="NAME=VALUE", help="Start value, e.g. theta_m=-2.")
 @click.option("--noise", default="0", show_default=True,
@@ -29,9 +39,9 @@ __all__ = ["data", "simulate"]
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: long runs on a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
-def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: tuple[str, ...],
-             starts: tuple[str, ...], noise: str, seed: int, out: str | None, progress: bool | None,
-             as_json: bool) -> None:
+def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: str, time_column: str | None,
+             duration: str | None, dt: str | None, sets: tuple[str, ...], starts: tuple[str, ...], noise: str,
+             seed: int, out: str | None, progress: bool | None, as_json: bool) -> None:
     """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
 
     PATH is an .fmu file, or `bundled` for the bundled servo.
@@ -40,6 +50,7 @@ def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: t
     Example:
       cosim simulate bundled --input Tm=square:amp=0.1,freq=2 --duration 4 --dt 1/2257 \\
           --set Fc=0.3 --noise 0.1 --seed 0 -o data.csv
+      cosim simulate bundled --input-file data.csv --set Fc=0.3 -o again.csv
     """
     from ..data.simulation import simulate as run
 
@@ -47,8 +58,17 @@ def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: t
     parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
     start = {k: parse_number(v, what=f"--start {k}") for k, v in _pairs(starts, "--start").items()}
     level = parse_number(noise, what="--noise")
-    traj = run(fmu_path, _pairs(inputs, "--input"), duration=parse_number(duration, what="--duration"),
-               dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress)
+    signals: dict = dict(_pairs(inputs, "--input"))
+    t0, note = 0.0, ""
+    if input_file:
+        record_signals, t0, step, span, note = _recorded(fmu_path, input_file, time_column, hold, dt, duration,
+                                                         set(signals))
+        signals.update(record_signals)
+        dt, duration = dt or repr(step), duration or repr(span)
+    if dt is None or duration is None:
+        raise InvalidSettingError("give --dt and --duration (or --input-file, whose step and length they take)")
+    traj = run(fmu_path, signals, duration=parse_number(duration, what="--duration"),
+               dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress, t0=t0)
     if level:
         traj = traj.with_noise(level, seed=seed)
     if out:
@@ -57,9 +77,49 @@ def simulate(path: str, inputs: tuple[str, ...], duration: str, dt: str, sets: t
     summary = {"path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path), "samples": len(traj),
                "dt": traj.meta["dt"], "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
                "noise": level, "seed": seed, "final": final}
+    if input_file:
+        summary["input_file"] = {"path": input_file, "hold": hold, "note": note}
     text = (f"simulated {len(traj)} samples of {', '.join(traj.names)}"
-            + (f" with {level:g} noise" if level else "") + (f"; wrote {out}" if out else ""))
+            + (f" with {level:g} noise" if level else "") + (f"; {note}" if note else "")
+            + (f"; wrote {out}" if out else ""))
     _emit(as_json, summary, text)
+
+
+def _recorded(fmu_path: Path, input_file: str, time_column: str | None, hold: str, dt: str | None,
+              duration: str | None, given: set[str]) -> tuple[dict, float, float, float, str]:
+    """The FMU inputs found in `input_file`, sampled on the run's grid: (signals, t0, file step, file span,
+    a note saying what was taken and how it is held)."""
+    from ..data.datafile import load_data
+    from ..data.simulation import recorded_inputs, steps_for
+    from ..plant.fmu_plant import REAL_TYPES
+    from ..plant.model_description import open_model_description
+
+    names = [v.name for v in open_model_description(fmu_path).modelVariables
+             if v.causality == "input" and v.type in REAL_TYPES]
+    record = load_data(input_file, time=time_column, excitation=False)
+    found = [n for n in names if n in record.names]
+    if not found:
+        raise InvalidSettingError(f"{Path(input_file).name} has no column named as an input of {fmu_path.name} "
+                                  f"({', '.join(names) or 'none'}); its columns: {', '.join(record.names)}")
+    twice = sorted(given & set(found))
+    if twice:
+        raise InvalidSettingError(f"input {twice[0]} is given by --input and by --input-file; give it once")
+    step = float(record.dt)
+    stated = record.meta.get("dt")  # a cosim file's own step, exact (the one from its time column is rounded)
+    if isinstance(stated, (int, float)) and abs(stated - step) <= 1e-9 * step:
+        step = float(stated)
+    span = float(record.time[-1] - record.time[0])
+    run_dt = parse_number(dt, what="--dt") if dt else step
+    run_duration = parse_number(duration, what="--duration") if duration else span
+    n = steps_for(run_duration, run_dt)
+    t0 = float(record.time[0])
+    grid = t0 + run_dt * np.arange(n + 1)
+    values = recorded_inputs(record, found, grid, hold=hold)
+    how = "held between samples (zero-order hold)" if hold == "zoh" else "interpolated linearly"
+    rest = [n for n in names if n not in found and n not in given]
+    note = (f"inputs {', '.join(found)} from {Path(input_file).name}, {how}"
+            + (f"; {', '.join(rest)} at their start values" if rest else ""))
+    return values, t0, step, span, note
 
 
 @click.group()

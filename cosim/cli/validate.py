@@ -43,13 +43,16 @@ __all__ = ["validate_command"]
 @click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler for the Monte Carlo.")
 @click.option("--workers", type=click.IntRange(1, None), default=None, help="Local worker processes.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the Monte Carlo draws.")
+@click.option("--progress/--no-progress", default=None,
+              help="Progress bars on stderr (default: only when stderr is a terminal).")
 @click.option("--json", "as_json", is_flag=True,
               help='Print {"passed", "metrics", "solve_time_us": {"median", "p99"}, "reasons", ...}.')
 @_friendly
 def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, ...], sets: tuple[str, ...],
                      specs: tuple[str, ...], report_path: str | None, plots_dir: str | None, no_model: bool,
                      samples: int, spread: float, effects: tuple[str, ...], min_pass_rate: float,
-                     scheduler: str | None, workers: int | None, seed: int, as_json: bool) -> None:
+                     scheduler: str | None, workers: int | None, seed: int, progress: bool | None,
+                     as_json: bool) -> None:
     """Run a controller against an FMU in closed loop and check specs; exit 1 when one fails.
 
     With --robustness N it also validates on N plants drawn around the nominal one (inertias, stiffness and
@@ -77,14 +80,14 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
     controller = load_controller(controller_path)
     parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
     verdict = validate(fmu, controller, scenario_list, spec_list, parameters=parameters or None,
-                       model=None if no_model else "design")
+                       model=None if no_model else "design", progress=progress)
     rob = None
     if samples:
         from ..study.robustness import robustness
 
         rob = robustness(fmu, controller, [s.with_effects(**parameters) for s in scenario_list], spec_list,
                          samples=samples, spread=spread, effects=_ranges(effects, "--effect"), seed=seed,
-                         scheduler=scheduler, workers=workers)
+                         scheduler=scheduler, workers=workers, progress=progress)
     payload = verdict.to_dict()
     files: dict[str, str] = {}
     if report_path or plots_dir:

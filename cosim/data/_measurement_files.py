@@ -4,7 +4,28 @@
 
 Each reader finds the time variable, checks that the file has every variable the columns use (an
 :class:`~cosim.errors.UnknownVariableError` lists the ones it has) and gives them as :class:`_Raw`, with the
-units, roles and meta a cosim file stores.
+units, roles and meta a cosim file stores. :func:`_values` then gives one value a column reads as a vector of one
+value per time (or a scalar).
+
+A ``.mat`` variable may be a matrix of channels, read one at a time as ``data[:,k]`` (column ``k``) or
+``data[k,:]`` (row ``k``); the time too (``time="data[:,0]"``). Indices are 0-based, as in NumPy; a vector takes
+index 0 whichever way it is stored. An index outside the matrix is a one-line
+:class:`~cosim.errors.DataError` naming the variable, its shape and the valid range. CSV and Parquet columns are
+vectors, so indexing one is refused.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> import numpy as np, scipy.io
+>>> path = pathlib.Path(tempfile.mkdtemp()) / "rig.mat"
+>>> scipy.io.savemat(path, {"data": np.arange(12.0).reshape(4, 3)})
+>>> variables = {"data": scipy.io.loadmat(path)["data"]}
+>>> _values(path, _Ref("data", 1, 2), variables, None)
+array([ 2.,  5.,  8., 11.])
+>>> _values(path, _Ref("data", 1, 3), variables, None)
+Traceback (most recent call last):
+cosim.errors.DataError: data[:,3]: data is 4 x 3, column index must be 0..2 (indices are 0-based, as in NumPy; \
+file rig.mat)
 """
 
 from __future__ import annotations
@@ -18,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, UnknownVariableError
-from ._column_expressions import _Column, _plain_column
+from ._column_expressions import _INDEX_HELP, _Column, _parse_reference, _plain_column, _Ref
 from .trajectory import Trajectory
 
 _TIME_NAMES = ("t", "time")
@@ -26,10 +47,11 @@ _TIME_NAMES = ("t", "time")
 
 @dataclass
 class _Raw:
-    """What a file gave: its variables (name -> ndarray as stored), time name, units, roles, meta."""
+    """What a file gave: its variables (name -> ndarray as stored), time (a variable or a column of one), units,
+    roles, meta."""
 
     variables: dict[str, np.ndarray]
-    time: str
+    time: _Ref
     units: dict[str, str]
     roles: dict[str, str]
     meta: dict[str, Any]
@@ -39,22 +61,46 @@ def _listing(names: Sequence[str]) -> str:
     return ", ".join(names) or "(nothing)"
 
 
-def _time_name(path: Path, names: Sequence[str], time: str | None) -> str:
+def _refuse_index(path: Path, ref: _Ref, where: str) -> None:
+    """CSV and Parquet columns are vectors: indexing one (``qm[:,0]``) is refused."""
+    if ref.axis is not None:
+        kind = "Parquet" if path.suffix.lower() in (".parquet", ".pq") else "CSV"
+        raise DataError(f"{where}: {ref.key} indexes {ref.variable!r} as a matrix, but {path.name} is a {kind} "
+                        f"file, whose columns are vectors (only a .mat variable can be a matrix; indices are "
+                        f"0-based, as in NumPy); use the column by name, {ref.variable}")
+
+
+def _time_name(path: Path, names: Sequence[str], time: str | None, matrices: bool = True) -> _Ref:
+    """The time: ``t`` else ``time`` by default, else the variable `time` names or the column or row of a ``.mat``
+    matrix it indexes (``"data[:,0]"``; `matrices` False, for a CSV or Parquet table, refuses that)."""
+    if time is not None and time not in names:
+        ref = _parse_reference(time, f"time {time!r}")
+        if ref is not None:
+            if not matrices:
+                _refuse_index(path, ref, f"time {time!r}")
+            if ref.variable in names:
+                return ref
+            raise UnknownVariableError(f"{path.name} has no variable {ref.variable!r} (time {time!r}); it has: "
+                                       f"{_listing(names)}; check the spelling")
     candidates = _TIME_NAMES if time is None else (time,)
     for name in candidates:
         if name in names:
-            return name
+            return _Ref(name)
     wanted = " or ".join(repr(c) for c in candidates)
     raise UnknownVariableError(f"{path.name} has no time variable {wanted}; it has: {_listing(names)}; "
-                               "pass time=<name of the time variable> (--time on the command line)")
+                               "pass time=<name of the time variable> (--time on the command line; data[:,0] "
+                               "for column 0 of a .mat matrix)")
 
 
 def _missing(path: Path, names: Sequence[str], columns: Sequence[_Column]) -> None:
     for column in columns:
         for var in column.variables:
             if var not in names:
+                base = var.partition("[")[0].strip()
+                hint = (f"; to read one column of the matrix {base}, name it: x={var} (indices are 0-based)"
+                        if column.plain and "[" in var and base in names else "; check the spelling")
                 raise UnknownVariableError(f"{path.name} has no variable {var!r} (column {column.describe()!r}); "
-                                           f"it has: {_listing(names)}; check the spelling")
+                                           f"it has: {_listing(names)}{hint}")
 
 
 def _read_mat(path: Path, time: str | None, columns: list[_Column] | None) -> tuple[_Raw, list[_Column]]:
@@ -71,21 +117,65 @@ def _read_mat(path: Path, time: str | None, columns: list[_Column] | None) -> tu
                         "with MATLAB's save (version 7 or older)") from None
     variables = {k: v for k, v in data.items() if not k.startswith("__")}
     names = list(variables)
-    time_name = _time_name(path, names, time)
-    n = _vector(path, time_name, variables[time_name], None).size
+    time_ref = _time_name(path, names, time)
+    n = _values(path, time_ref, variables, None).size
     if columns is None:
         columns = [_plain_column(name) for name in names
-                   if name != time_name and _is_numeric(variables[name]) and np.size(variables[name]) == n
+                   if name != time_ref.variable and _is_numeric(variables[name]) and np.size(variables[name]) == n
                    and np.ndim(np.squeeze(variables[name])) == 1]
         if not columns:
-            raise DataError(f"{path.name} has no vector of {n} samples besides {time_name!r}; it has: "
-                            f"{_listing(names)}")
+            matrices = [name for name in names if _is_numeric(variables[name]) and np.ndim(variables[name]) == 2
+                        and min(variables[name].shape) > 1]
+            hint = (f"; name the columns of a matrix, e.g. columns=['x={matrices[0]}[:,1]'] (indices are 0-based)"
+                    if matrices else "")
+            raise DataError(f"{path.name} has no vector of {n} samples besides {time_ref.key!r}; it has: "
+                            f"{_listing(names)}{hint}")
     _missing(path, names, columns)
-    return _Raw(variables, time_name, {}, {}, {}), columns
+    return _Raw(variables, time_ref, {}, {}, {}), columns
 
 
 def _is_numeric(value: Any) -> bool:
     return isinstance(value, np.ndarray) and value.dtype.kind in "fiub"
+
+
+def _shape(value: np.ndarray) -> str:
+    return " x ".join(str(size) for size in value.shape) if value.ndim else "a scalar"
+
+
+def _pick(path: Path, ref: _Ref, value: Any, n: int | None, time_name: str) -> np.ndarray:
+    """Column or row ``ref.index`` of the matrix `value` (a vector, stored either way, takes index 0 only)."""
+    if not _is_numeric(value):
+        _vector(path, ref.variable, value, None)  # raises: not numbers
+    where = f"{ref.key}: {ref.variable} is {_shape(value)}"
+    zero_based = f"(indices are 0-based, as in NumPy; file {path.name})"
+    if value.ndim > 2:
+        raise DataError(f"{where}; only a vector or a 2-D matrix can be indexed, as {ref.variable}[:,k] or "
+                        f"{ref.variable}[k,:] {zero_based}")
+    if value.ndim < 2 or min(value.shape) == 1:  # a vector: [:,0] and [0,:] both give all of it
+        if ref.index != 0:
+            raise DataError(f"{where}, a vector: {ref.what} index must be 0 {zero_based}")
+        return value.reshape(-1)
+    count = value.shape[ref.axis]  # type: ignore[index]  # axis is 0 or 1 here
+    if not 0 <= ref.index < count:
+        valid = f", {ref.what} index must be 0..{count - 1}" if count else f": it has no {ref.what}s"
+        raise DataError(f"{where}{valid} {zero_based}")
+    picked = np.take(value, ref.index, axis=ref.axis)
+    if n is not None and picked.size != n and count == n:  # the channels run the other way
+        other = _Ref(ref.variable, 1 - ref.axis, ref.index)  # type: ignore[operator]
+        pattern = f"{ref.variable}[:,k]" if other.axis == 1 else f"{ref.variable}[k,:]"
+        fix = other.key if ref.index < picked.size else f"{pattern} with k in 0..{picked.size - 1}"
+        raise DataError(f"{where}: its {other.what}s are the channels ({n} samples, like {time_name!r}), so "
+                        f"{ref.key} has {picked.size} values; write {fix} {zero_based}")
+    return picked
+
+
+def _values(path: Path, ref: _Ref, variables: dict[str, np.ndarray], n: int | None,
+            time_name: str = "") -> np.ndarray:
+    """What `ref` reads from the file's `variables`, as :func:`_vector` gives it."""
+    value = variables[ref.variable]
+    if ref.axis is not None:
+        value = _pick(path, ref, value, n, time_name)
+    return _vector(path, ref.key, value, n, time_name)
 
 
 def _vector(path: Path, name: str, value: Any, n: int | None, time_name: str = "") -> np.ndarray:
@@ -99,7 +189,8 @@ def _vector(path: Path, name: str, value: Any, n: int | None, time_name: str = "
         return squeezed  # a scalar, broadcast over time
     if squeezed.ndim != 1:
         expected = f"a vector of {n} samples like {time_name!r} or a scalar" if n else "a vector"
-        raise DataError(f"variable {name!r} of {path.name} has shape {shape}; expected {expected}")
+        hint = f"; {_INDEX_HELP} ({name}[:,0] is its first column)" if squeezed.ndim == 2 else ""
+        raise DataError(f"variable {name!r} of {path.name} has shape {shape}; expected {expected}{hint}")
     if n is not None and squeezed.size != n:
         raise DataError(f"variable {name!r} of {path.name} has {squeezed.size} samples, expected {n} like "
                         f"{time_name!r}; use variables recorded on the same time base")
@@ -130,9 +221,13 @@ def _table_names(path: Path, kind: str) -> list[str]:
 def _read_table(path: Path, kind: str, time: str | None, columns: list[_Column] | None
                 ) -> tuple[_Raw, list[_Column]]:
     names = _table_names(path, kind)
-    time_name = _time_name(path, names, time)
+    time_ref = _time_name(path, names, time, matrices=False)
+    time_name = time_ref.variable
     if columns is None:
         columns = [_plain_column(name) for name in names if name != time_name]
+    for column in columns:
+        for ref in column.references:
+            _refuse_index(path, ref, f"column {column.describe()!r}")
     _missing(path, names, columns)
     needed = list(dict.fromkeys(v for c in columns for v in c.variables if v != time_name))
     traj = Trajectory.read(path, time=time_name, columns=needed)
@@ -140,4 +235,4 @@ def _read_table(path: Path, kind: str, time: str | None, columns: list[_Column] 
     variables[time_name] = traj.time
     units = dict(zip(traj.names, traj.units, strict=True))
     roles = dict(zip(traj.names, traj.roles, strict=True))
-    return _Raw(variables, time_name, units, roles, dict(traj.meta)), columns
+    return _Raw(variables, time_ref, units, roles, dict(traj.meta)), columns

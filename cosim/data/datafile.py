@@ -14,8 +14,9 @@ Formats, by suffix
     header row with a time column).
 ``.mat``
     MATLAB files up to version 7 (``scipy.io.loadmat``), each variable a column or row vector of one value per
-    time, or a scalar (a gain, say) that an expression broadcasts over time. MATLAB v7.3 files are HDF5 files
-    that cosim does not read: re-save them with ``save(file, '-v7')`` (or export a CSV).
+    time, a scalar (a gain, say) that an expression broadcasts over time, or a matrix of channels read one
+    column or row at a time (below). MATLAB v7.3 files are HDF5 files that cosim does not read: re-save them
+    with ``save(file, '-v7')`` (or export a CSV).
 
 Columns
 -------
@@ -23,6 +24,17 @@ A column is a variable of the file (``"qm"``) or a named expression of the file'
 ``"force=35.15*vir + pulses_N"``): numbers and variables combined with ``+ - * /``, unary minus and
 parentheses, parsed with :mod:`ast` (nothing is passed to ``eval``). Scalars broadcast over time. Give them as a
 sequence of such strings or as a mapping ``{name: expression}``.
+
+Matrix variables (``.mat`` only)
+--------------------------------
+A rig often saves every channel as a column of one array. Name each column you want: ``"pos=data[:,2]"`` is
+column 2 of the variable ``data``, ``"pos=data[2,:]"`` row 2 of a matrix stored with one channel per row.
+**Indices are 0-based, as in Python and NumPy**: ``data[:,0]`` is MATLAB's ``data(:,1)``. Spaces are free
+(``data[:, 2]``), an indexed variable may stand in an expression (``"force=35.15*data[:,3]"``), and the time may
+be one too (``time="data[:,0]"``). A vector takes index 0 whichever way it is stored. An index outside the
+matrix is a :class:`~cosim.errors.DataError` naming the variable, its shape and the valid range
+(``data[:,7]: data is 5000 x 4, column index must be 0..3 ...``). CSV and Parquet columns are vectors: indexing
+one is refused.
 
 Checks (each a one-line error naming what, where and what to do)
 ----------------------------------------------------------------
@@ -56,6 +68,16 @@ Examples
 (('x', 'x_dot', 'u'), ('state', 'output', 'input'))
 >>> bool(np.allclose(traj["x_dot"], t))
 True
+
+A matrix with time in column 0 and the channels in the next columns:
+
+>>> rig = path.with_name("rig.mat")
+>>> scipy.io.savemat(rig, {"data": np.column_stack([t, 0.5 * t**2, np.sin(t)])})
+>>> traj = load_data(rig, time="data[:,0]", columns=["x=data[:,1]", "u=2*data[:, 2]"])
+>>> traj.names, traj.meta["data_file"]["time"], traj.meta["data_file"]["columns"]
+(('x', 'u'), 'data[:,0]', {'x': 'data[:,1]', 'u': '2*data[:, 2]'})
+>>> bool(np.array_equal(traj["x"], 0.5 * t**2))
+True
 """
 
 from __future__ import annotations
@@ -71,7 +93,7 @@ import numpy as np
 
 from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
 from ._column_expressions import _evaluate, _parse_columns
-from ._measurement_files import _listing, _read_mat, _read_table, _vector
+from ._measurement_files import _listing, _read_mat, _read_table, _values
 from .derivatives import DERIVATIVE_METHODS, _method, _savgol_windows, differentiate
 from .trajectory import Trajectory
 
@@ -183,6 +205,7 @@ def load_data(
     derive_options: Mapping[str, Any] | None = None,
     derive_window: int | None = None,
     resample: bool = False,
+    excitation: bool = True,
 ) -> Trajectory:
     """Read measured data from a ``.csv``, ``.parquet`` or ``.mat`` file into a checked :class:`Trajectory`.
 
@@ -191,12 +214,14 @@ def load_data(
     path : path-like
         The file; its suffix says the format (``.csv``, ``.parquet``/``.pq``, ``.mat``).
     time : str, optional
-        Name of the time variable in s; default ``"t"``, else ``"time"``.
+        Name of the time variable in s; default ``"t"``, else ``"time"``. In a ``.mat`` file, also a column or
+        row of a matrix: ``"data[:,0]"``, ``"data[0,:]"`` (0-based).
     columns : sequence of str or mapping, optional
         The signals, in order: a variable of the file (``"qm"``) or a named expression of its variables
         (``"force=gtau*vir"``; mapping form ``{"force": "gtau*vir"}``) built from numbers, variables (vectors
-        or scalars, which broadcast), ``+ - * /``, unary minus and parentheses. Default: every variable that
-        is a vector of one value per time.
+        or scalars, which broadcast), ``+ - * /``, unary minus and parentheses. A ``.mat`` matrix variable is read
+        by 0-based column, ``"pos=data[:,2]"``, or row, ``"pos=data[2,:]"``, also inside an expression
+        (``"force=35.15*data[:, 3]"``). Default: every variable that is a vector of one value per time.
     roles : mapping, optional
         Signal name -> ``"state"``, ``"input"``, ``"output"`` or ``"reference"``, derived signals included
         (``{"qm": "state", "qm_dot": "state", "force": "input"}``); default ``"output"`` (or the role a cosim
@@ -223,6 +248,9 @@ def load_data(
         Put a record whose time steps are not uniform (beyond :data:`UNIFORM_RTOL` of the median step) onto the
         uniform grid ``t0 + k * dt`` (dt the median step) by linear interpolation of every column, instead of
         refusing it. Time must still be strictly increasing.
+    excitation : bool
+        Refuse an input that is constant (:func:`check_excitation`: nothing to identify from); false for a record
+        that only drives a simulation.
 
     Returns
     -------
@@ -239,13 +267,16 @@ def load_data(
     FmuNotFoundError
         No file at `path`.
     InvalidSettingError
-        An unknown suffix, a malformed column, an unknown derivative method or option.
+        An unknown suffix, a malformed column (brackets other than ``[:,k]`` or ``[k,:]`` included), an unknown
+        derivative method or option.
     UnknownVariableError
         A variable (time, column, derived or role name) that is not there; the message lists what there is.
     DataError
-        Unreadable file (a MATLAB v7.3 file included), a variable that is not a vector of one value per time, too
-        few samples (the message gives the minimum), NaN or inf (naming column, time and row), time not strictly
-        increasing or not uniform (naming the row), a constant input (:func:`check_excitation`).
+        Unreadable file (a MATLAB v7.3 file included), a variable that is not a vector of one value per time, a
+        matrix index out of range (naming the variable, its shape and the valid range) or an index on a CSV or
+        Parquet column, too few samples (the message gives the minimum), NaN or inf (naming column, time and
+        row), time not strictly increasing or not uniform (naming the row), a constant input
+        (:func:`check_excitation`).
 
     Examples
     --------
@@ -271,7 +302,8 @@ force [] input)
         what = "is a folder, not a file" if path.is_dir() else "does not exist"
         raise FmuNotFoundError(f"data file {path} {what}; check the path")
     if time is not None and not isinstance(time, str):
-        raise InvalidSettingError(f"time must be the name of the time variable, got {time!r}")
+        raise InvalidSettingError(f"time must be the name of the time variable (or data[:,0], column 0 of a .mat "
+                                  f"matrix), got {time!r}")
     parsed = None if columns is None else _parse_columns(columns)
     derive = (derive,) if isinstance(derive, str) else tuple(dict.fromkeys(derive))
     if derive_window is not None:
@@ -282,14 +314,15 @@ force [] input)
     method, options, min_derive = _method(derive_method, derive_options, derive_order) if derive else (None, {}, 0)
 
     raw, parsed = _read_mat(path, time, parsed) if kind == "mat" else _read_table(path, kind, time, parsed)
-    t = _vector(path, raw.time, raw.variables[raw.time], None)
+    time_name = raw.time.key  # "t", or "data[:,0]" for a column of a matrix
+    t = _values(path, raw.time, raw.variables, None)
     n = t.size
     env: dict[str, float | np.ndarray] = {}
     scalars: dict[str, float] = {}
-    for var in dict.fromkeys(v for c in parsed for v in c.variables):
-        env[var] = _vector(path, var, raw.variables[var], n, raw.time)
-        if np.ndim(env[var]) == 0:
-            scalars[var] = float(env[var])
+    for ref in dict.fromkeys(r for c in parsed for r in c.references):
+        env[ref.key] = _values(path, ref, raw.variables, n, time_name)
+        if np.ndim(env[ref.key]) == 0:
+            scalars[ref.key] = float(env[ref.key])
     signals: dict[str, np.ndarray] = {}
     for column in parsed:
         signals[column.name] = np.broadcast_to(np.asarray(_evaluate(column.tree, env), dtype=float), (n,)).copy()
@@ -298,14 +331,14 @@ force [] input)
     if n < minimum:
         why = f" ({derive_method} with {options})" if min_derive > MIN_SAMPLES else ""
         raise DataError(f"{path.name} has {n} samples; at least {minimum} are needed{why}; use a longer record")
-    _check_time(path, raw.time, t)
+    _check_time(path, time_name, t)
     for name, values in signals.items():
         finite = np.isfinite(values)
         if not finite.all():
             row = int(np.argmin(finite))
             raise DataError(f"column {name!r} of {path.name} is {values[row]} at t={_fmt(t[row])} s (row {row}); "
                             "expected finite values; drop or fill the bad samples")
-    dt, must_resample = _uniform_step(path, raw.time, t, resample)
+    dt, must_resample = _uniform_step(path, time_name, t, resample)
     meta_resampled: dict[str, Any] | None = None
     grid = t[0] + dt * np.arange(n)
     time_shift = float(np.max(np.abs(grid - t)))
@@ -357,7 +390,7 @@ force [] input)
     role_of.update(dict(roles or {}))
 
     data_meta: dict[str, Any] = {
-        "file": str(path), "format": kind, "time": raw.time,
+        "file": str(path), "format": kind, "time": time_name,
         "columns": {c.name: c.text for c in parsed}, "scalars": scalars,
         "derivatives": None if not derive else {
             "of": list(derive), "order": derive_order, "method": derive_method, "options": options,
@@ -368,4 +401,4 @@ force [] input)
     traj = Trajectory.from_arrays(t, ordered, units={k: unit_of.get(k, "") for k in ordered},
                                   roles={k: role_of.get(k, "output") for k in ordered},
                                   meta={**raw.meta, "data_file": data_meta, "dt": dt})
-    return check_excitation(traj)
+    return check_excitation(traj) if excitation else traj

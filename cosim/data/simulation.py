@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,7 @@ from ..plant.fmu_plant import FmuPlant
 from .signals import Signal, parse_signal
 from .trajectory import Trajectory
 
-__all__ = ["simulate", "InputSpec", "sample_input"]
+__all__ = ["HOLDS", "simulate", "InputSpec", "recorded_inputs", "sample_input"]
 
 #: What an input can be given as: a Signal (or any callable of time), a constant, samples at the
 #: communication points, or a signal spec string such as ``"square:amp=0.1,freq=2"``.
@@ -99,6 +99,40 @@ def _unit(var: Any) -> str:
     return unit or ""
 
 
+HOLDS = ("zoh", "linear")
+
+
+def recorded_inputs(record: Trajectory, names: Sequence[str], t: np.ndarray, *, hold: str = "zoh"
+                    ) -> dict[str, np.ndarray]:
+    """Inputs `names` of a recorded trajectory sampled at the times `t`, for :func:`simulate`.
+
+    ``hold="zoh"`` holds each recorded value until the next recorded time (cosim's convention for inputs, so
+    that a trajectory :func:`simulate` wrote drives the FMU again exactly); ``"linear"`` interpolates between
+    recorded samples. Times outside the record are refused.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cosim.data.trajectory import Trajectory
+    >>> rec = Trajectory.from_arrays([0.0, 1.0, 2.0], {"u": [0.0, 1.0, 3.0]}, roles={"u": "input"})
+    >>> recorded_inputs(rec, ["u"], np.array([0.0, 0.5, 1.5]))["u"].tolist()
+    [0.0, 0.0, 1.0]
+    >>> recorded_inputs(rec, ["u"], np.array([0.5, 1.5]), hold="linear")["u"].tolist()
+    [0.5, 2.0]
+    """
+    if hold not in HOLDS:
+        raise InvalidSettingError(f"hold={hold!r}; choose one of {', '.join(HOLDS)}")
+    time = record.time
+    span = 1e-9 * (float(np.median(np.diff(time))) if len(time) > 1 else 1.0)
+    if t[0] < time[0] - span or t[-1] > time[-1] + span:
+        raise InvalidSettingError(f"the run ({t[0]:.9g} to {t[-1]:.9g} s) reaches outside the recorded inputs "
+                                  f"({time[0]:.9g} to {time[-1]:.9g} s); shorten --duration")
+    if hold == "zoh":
+        index = np.clip(np.searchsorted(time, t + span, side="right") - 1, 0, len(time) - 1)
+        return {name: np.asarray(record[name], dtype=float)[index] for name in names}
+    return {name: np.interp(t, time, np.asarray(record[name], dtype=float)) for name in names}
+
+
 def simulate(
     fmu: str | os.PathLike,
     inputs: Mapping[str, InputSpec] | None = None,
@@ -127,8 +161,9 @@ def simulate(
         Start time.
     outputs : list of str, optional
         Outputs to record (default: all).
-    progress : bool, optional
-        Show a progress bar; by default only for long runs on a terminal.
+    progress : bool or None, default None
+        Progress bar on stderr. None shows it for long runs (200,000 steps or more) and only when stderr is
+        a terminal; True shows it anyway, False hides it.
 
     Returns
     -------

@@ -18,6 +18,7 @@ Imports the data and plant rooms and the foundation.
 
 from __future__ import annotations
 
+from .compare import Comparison, compare
 from .kinematics import KinematicPair, detect_kinematics
 from .metrics import METRICS, k_step_ahead_error, max_deviation_pct, nrmse_fit_pct, r2
 from .model import DIVERGENCE_LIMIT, MODEL_FORMAT, MODEL_VERSION, IdentifiedModel, SimulationResult
@@ -26,8 +27,8 @@ from .sindyc import DIFFERENTIATION_METHODS, MIN_SAMPLES_PER_TERM, Identificatio
 from .terms import FUNCTIONS, Term, compile_rhs, compile_rk4, polynomial_terms
 
 __all__ = [
-    "DIFFERENTIATION_METHODS", "DIVERGENCE_LIMIT", "FUNCTIONS", "IdentificationWarning", "IdentifiedModel",
-    "KinematicPair", "detect_kinematics",
+    "Comparison", "DIFFERENTIATION_METHODS", "DIVERGENCE_LIMIT", "FUNCTIONS", "IdentificationWarning",
+    "IdentifiedModel", "KinematicPair", "compare", "detect_kinematics",
     "METRICS", "MIN_SAMPLES_PER_TERM", "MODEL_FORMAT", "MODEL_VERSION", "OutputErrorFit", "SINDYc",
     "SimulationResult", "Term", "compile_rhs", "compile_rk4", "k_step_ahead_error", "max_deviation_pct",
     "nrmse_fit_pct", "polynomial_terms", "r2", "refine_output_error", "simulate_linear_batch",

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import DataError, InvalidSettingError
 
-__all__ = ["r2", "nrmse_fit_pct", "max_deviation_pct", "k_step_ahead_error", "METRICS"]
+__all__ = ["r2", "nrmse_fit_pct", "max_deviation_pct", "k_step_ahead_error", "k_step_ahead_predictions",
+           "METRICS"]
 
 
 def _pair(measured: Any, predicted: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -208,9 +209,21 @@ def k_step_ahead_error(model: Any, trajectory: Any, k: int) -> dict[str, float]:
                                   f"got {k!r}")
     if n > 1 and not trajectory.is_uniform():
         raise DataError("the trajectory is not uniformly sampled; k-step-ahead prediction needs one step dt")
-    dt = trajectory.dt
-    x = np.asarray(trajectory[list(model.states)], dtype=float)
-    u = np.asarray(trajectory[list(model.inputs)], dtype=float) if model.inputs else np.zeros((n, 0))
+    x = np.asarray(trajectory[list(model.states)], dtype=float).reshape(n, -1)
+    u = np.asarray(trajectory[list(model.inputs)], dtype=float).reshape(n, -1) if model.inputs else None
+    predicted = k_step_ahead_predictions(model, x, u, trajectory.dt, k)
+    with np.errstate(over="ignore", invalid="ignore"):
+        err = np.sqrt(np.mean((predicted - x[k:]) ** 2, axis=0))
+    err = np.where(np.isfinite(err), err, np.inf)
+    return {name: float(err[i]) for i, name in enumerate(model.states)}
+
+
+def k_step_ahead_predictions(model: Any, x: np.ndarray, u: np.ndarray | None, dt: float, k: int) -> np.ndarray:
+    """Predictions of ``x[k:]``, each from the measured state `k` samples before with the zero-order-hold inputs
+    in between: a linear model stepped with its exact discretisation, a nonlinear one with RK4 (one step per
+    sample), all starting points at once. Rows that leave the model's range hold inf or NaN."""
+    n = len(x)
+    u = np.zeros((n, 0)) if u is None else u
     m = n - k
     state = x[:m].copy()
     with np.errstate(over="ignore", invalid="ignore"):
@@ -227,6 +240,4 @@ def k_step_ahead_error(model: Any, trajectory: Any, k: int) -> dict[str, float]:
                 k3 = f(state + 0.5 * dt * k2, ui)
                 k4 = f(state + dt * k3, ui)
                 state = state + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        err = np.sqrt(np.mean((state - x[k:]) ** 2, axis=0))
-    err = np.where(np.isfinite(err), err, np.inf)
-    return {name: float(err[i]) for i, name in enumerate(model.states)}
+    return state

@@ -47,6 +47,7 @@ def _run_case(func: Callable[..., Any], case: Mapping[str, Any]) -> _Outcome:
 
 
 def _bar(total: int, desc: str, disable: bool | None) -> tqdm:
+    """The sweep's bar on stderr; ``disable=None`` lets tqdm show it only when stderr is a terminal."""
     return tqdm(total=total, desc=desc, unit="case", disable=disable, file=sys.stderr, dynamic_ncols=True)
 
 

@@ -152,7 +152,7 @@ def reproduce_paper(
     noise_levels: Sequence[float] = STUDY_NOISE_LEVELS,
     excitations: Sequence[str] = ("square", "sine"),
     workers: int | None = None,
-    progress: bool = True,
+    progress: bool | None = None,
     **settings: Any,
 ) -> PaperReproduction:
     """Reproduce the study's simulation results and write the comparison into `out_dir`.
@@ -170,8 +170,9 @@ def reproduce_paper(
         Subsets of the study's levels and of ``("square", "sine")``.
     workers : int, optional
         Local processes (default: all cores).
-    progress : bool
-        Show a progress bar.
+    progress : bool or None, default None
+        Progress bar on stderr, one step per case: None shows it only when stderr is a terminal, True shows
+        it anyway, False hides it.
     **settings
         Passed to :func:`cosim.study.cases.study_case` (identification settings, duration).
     """

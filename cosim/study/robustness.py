@@ -133,7 +133,7 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
                specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, samples: int = 50, spread: float = 0.2,
                uncertain: Sequence[str] = DEFAULT_UNCERTAIN,
                effects: Mapping[str, tuple[float, float]] | None = None, seed: int = 0,
-               scheduler: Any = None, workers: int | None = None, progress: bool | None = True) -> RobustnessResult:
+               scheduler: Any = None, workers: int | None = None, progress: bool | None = None) -> RobustnessResult:
     """Validate `controller` on `samples` plants drawn around the nominal one; pass rate and worst case.
 
     Parameters
@@ -154,8 +154,11 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
         Effect parameters drawn uniformly in a range, e.g. ``{"Fc": (0.0, 200.0)}``.
     seed : int
         Seed of the draws (the same seed gives the same plants wherever the samples run).
-    scheduler, workers, progress
+    scheduler, workers
         As for :func:`cosim.study.sweep.run_sweep`.
+    progress : bool or None, default None
+        Progress bar on stderr, one step per sample: None shows it only when stderr is a terminal, True
+        shows it anyway, False hides it.
 
     Returns
     -------

@@ -30,9 +30,10 @@ raises is recorded as a
 :class:`~cosim.study.sweep_result.SweepError` (type, one-line message, traceback) and the other cases still run.
 A local worker process that dies (a crash in native code, an out-of-memory kill) costs only the case it was
 running; Dask retries a task whose worker died and reports it failed (``KilledWorker``) after
-``distributed.scheduler.allowed-failures`` deaths (3 by default). A progress bar with an ETA on stderr
-advances as cases complete; results come back in the order of the cases. ``_example_case`` is a small seeded
-case shipped for the examples, the tests and a smoke test of a cluster.
+``distributed.scheduler.allowed-failures`` deaths (3 by default). A progress bar with an ETA on stderr (when
+stderr is a terminal, or with ``progress=True``) advances as cases complete; results come back in the order of
+the cases. ``_example_case`` is a small seeded case shipped for the examples, the tests and a smoke test of a
+cluster.
 
 Examples
 --------
@@ -169,7 +170,7 @@ def _default_workers() -> int:
 
 def run_sweep(func: Callable[..., Mapping[str, Any]], cases: Iterable[Mapping[str, Any]], *,
               scheduler: str | distributed.Client | None = None, workers: int | None = None,
-              progress: bool | None = True, desc: str = "sweep",
+              progress: bool | None = None, desc: str = "sweep",
               connect_timeout: float = CONNECT_TIMEOUT) -> SweepResult:
     """Run ``func(**case)`` for every case, in parallel, and collect each result or error in case order.
 
@@ -187,9 +188,9 @@ def run_sweep(func: Callable[..., Mapping[str, Any]], cases: Iterable[Mapping[st
     workers : int, optional
         Local worker processes (default: the CPUs this process may use); 1 runs the cases in this process,
         one after the other, handy for debugging. Only with ``scheduler=None``.
-    progress : bool or None, default True
-        Show a progress bar with an ETA on stderr as cases complete; False hides it, None shows it only on
-        a terminal.
+    progress : bool or None, default None
+        Progress bar with an ETA on stderr as cases complete. None shows it only when stderr is a terminal
+        (not when it is redirected to a file or a pipe); True shows it anyway, False hides it.
     desc : str, default "sweep"
         The progress bar's label.
     connect_timeout : float, default 10
