@@ -151,3 +151,23 @@ def test_every_mat_file_cosim_writes_reads_in_scipy(identified):
     assert result.exit_code == 0, result.output
     mat = scipy.io.loadmat(folder / "ss.mat")
     assert mat["A"].shape == (4, 4) and mat["B"].shape[0] == 4
+
+
+def test_a_mat_matrix_reads_wherever_a_csv_does(tmp_path):
+    """One .mat array of channels (time, x, v, u), addressed by column in identify, compare and data info."""
+    data = record(4, noise=0.01)
+    scipy.io.savemat(tmp_path / "rig.mat", {"data": np.column_stack([data.time, data["x"], data["v"], data["u"]])})
+    columns = ["--time", "data[:,0]", "--state", "x=data[:,1],v=data[:,2]", "--input", "u=data[:,3]"]
+    runner = CliRunner()
+    made = runner.invoke(main, ["identify", str(tmp_path / "rig.mat"), *columns, "-o", str(tmp_path / "m.json"),
+                                "--json"])
+    assert made.exit_code == 0, made.output
+    scored = runner.invoke(main, ["compare", str(tmp_path / "m.json"), str(tmp_path / "rig.mat"), *columns,
+                                  "--json"])
+    assert scored.exit_code == 0, scored.output
+    assert json.loads(scored.stdout)["fit_pct"] == pytest.approx(json.loads(made.stdout)["fit"]["fit_pct"])
+    assert min(json.loads(scored.stdout)["fit_pct"].values()) > 95.0
+    info = runner.invoke(main, ["data", "info", str(tmp_path / "rig.mat"), "--time", "data[:,0]", "--columns",
+                                "x=data[:,1],u=data[:,3]", "--json"])
+    assert info.exit_code == 0, info.output
+    assert [s["name"] for s in json.loads(info.stdout)["signals"]] == ["x", "u"]

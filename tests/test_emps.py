@@ -193,6 +193,10 @@ def test_example_script_refuses_a_missing_folder(tmp_path):
     assert "Traceback" not in result.stderr and "emps:" in result.stderr
 
 
+#: The issue's default path, also the README tour's EMPS line (tests/test_readme_tour.py checks they agree).
+DEFAULT_PATH_OPTIONS = ("--state", "qm,qm_dot", "--derive", "qm", "--input", "force=35.15*vir")
+
+
 @pytest.fixture(scope="module")
 def default_path(tmp_path_factory):
     """``cosim diagnose DATA_EMPS.mat --state qm,qm_dot --derive qm --input force=35.15*vir``, nothing else: the
@@ -203,8 +207,8 @@ def default_path(tmp_path_factory):
     from cosim.identify.model import IdentifiedModel
 
     out = tmp_path_factory.mktemp("emps_default") / "after.json"
-    result = CliRunner().invoke(main, ["diagnose", str(DATA / "DATA_EMPS.mat"), "--state", "qm,qm_dot", "--derive",
-                                       "qm", "--input", "force=35.15*vir", "--json", "-o", str(out)])
+    result = CliRunner().invoke(main, ["diagnose", str(DATA / "DATA_EMPS.mat"), *DEFAULT_PATH_OPTIONS, "--json",
+                                       "-o", str(out)])
     assert result.exit_code == 0, result.output
     return json.loads(result.stdout), IdentifiedModel.load(out)
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import InvalidSettingError
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _pairs, _resolve_fmu
+from ._command import _emit, _friendly, _names, _pairs, _resolve_fmu
 
 __all__ = ["data", "simulate"]
 
@@ -85,6 +85,16 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     _emit(as_json, summary, text)
 
 
+def _time_of(path: Path) -> str:
+    """The time column of a table: ``t`` when it has one and no ``time``, else ``time``."""
+    if path.suffix.lower() == ".csv" and path.is_file():
+        with open(path, encoding="utf-8-sig") as handle:
+            header = next((line for line in handle if not line.startswith("#")), "")
+        names = [n.strip() for n in header.split(",")]
+        return "t" if "t" in names and "time" not in names else "time"
+    return "time"
+
+
 def _recorded(fmu_path: Path, input_file: str, time_column: str | None, hold: str, dt: str | None,
               duration: str | None, given: set[str]) -> tuple[dict, float, float, float, str]:
     """The FMU inputs found in `input_file`, sampled on the run's grid: (signals, t0, file step, file span,
@@ -129,21 +139,30 @@ def data() -> None:
 
 @data.command("info")
 @click.argument("path")
-@click.option("--time", "time_column", default="time", show_default=True, help="Name of the time column [s].")
-@click.option("--columns", default=None, help="Comma-separated columns to read (default: all).")
+@click.option("--time", "time_column", default=None, metavar="COLUMN",
+              help="Time column [s] (default t, else time).")
+@click.option("--columns", default=None, help="Comma-separated columns to read (default: all; NAME=EXPR too).")
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 @_friendly
-def data_info(path: str, time_column: str, columns: str | None, as_json: bool) -> None:
+def data_info(path: str, time_column: str | None, columns: str | None, as_json: bool) -> None:
     """Check a data file (NaN, time order, columns) and describe it: signals, units, roles, sampling.
+
+    DATA is a CSV, Parquet or MATLAB .mat file.
 
     \b
     Example:
       cosim data info data.csv --columns Tm,theta_L
+      cosim data info rig.mat --time "data[:,0]" --columns "pos=data[:,1],force=data[:,2]"
     """
     from ..data.trajectory import Trajectory
 
-    chosen = [c.strip() for c in columns.split(",")] if columns else None
-    traj = Trajectory.read(path, columns=chosen, time=time_column)
+    chosen = _names(columns, "--columns") if columns else None
+    if Path(path).suffix.lower() == ".mat":
+        from ..data.datafile import load_data
+
+        traj = load_data(path, time=time_column, columns=chosen, excitation=False)
+    else:
+        traj = Trajectory.read(path, columns=chosen, time=time_column or _time_of(Path(path)))
     info = {
         "path": str(Path(path).resolve()), "samples": len(traj), "t_start": float(traj.time[0]),
         "t_end": float(traj.time[-1]), "dt": traj.dt, "uniform": traj.is_uniform(),

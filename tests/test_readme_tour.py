@@ -1,0 +1,109 @@
+"""The README's tour, run as a new user runs it: every command of its bash block, in order, in a fresh folder,
+each ending with exit status 0 and writing the files it names; the controllers designed on the identified model
+pass their validation specs. The cluster address is replaced by a local Dask cluster's.
+
+The two EMPS lines are the commands ``tests/test_emps.py`` runs on the real data (checked here to be the same
+command line): run again here they would add a minute and a half to the suite.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+CLUSTER = "tcp://host:8786"
+# options naming a file or folder a command writes
+WRITES = ("-o", "--output", "--to", "--report", "--plot", "--out-dir", "--out")
+
+
+def tour_commands(text: str) -> list[list[str]]:
+    """The commands of the README's tour block, continuation lines joined, comments dropped, as argv lists."""
+    block = re.search(r"## A tour\n.*?```bash\n(.*?)```", text, re.S)
+    assert block, "the README has no tour block"
+    joined = block.group(1).replace("\\\n", " ")
+    return [shlex.split(line, comments=True) for line in joined.splitlines() if line.strip()]
+
+
+def written(argv: list[str]) -> list[str]:
+    return [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg in WRITES]
+
+
+def test_the_tour_block_is_read_as_a_shell_reads_it():
+    commands = tour_commands(README.read_text(encoding="utf-8"))
+    assert all(argv[0] in ("cosim", "python") for argv in commands)
+    validate = next(argv for argv in commands if argv[:2] == ["cosim", "validate"])
+    assert "settling_time<=1" in validate and "overshoot<=10%" in validate  # quoted: not a redirection
+    assert written(commands[2]) == ["data.csv"]
+
+
+def test_the_emps_lines_are_the_commands_the_emps_tests_run():
+    from test_emps import DEFAULT_PATH_OPTIONS
+
+    emps = [argv for argv in tour_commands(README.read_text(encoding="utf-8")) if "emps" in " ".join(argv)]
+    assert emps == [["cosim", "diagnose", "../shared/data/emps/DATA_EMPS.mat", *DEFAULT_PATH_OPTIONS],
+                    ["python", "examples/emps.py", "--data", "../shared/data/emps"]]
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as local:
+        yield local.scheduler_address
+
+
+@pytest.mark.slow
+def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster):
+    outputs = {}
+    for argv in tour_commands(README.read_text(encoding="utf-8")):
+        if "emps" in " ".join(argv):
+            continue  # run by tests/test_emps.py (see the test above)
+        args = [cluster if arg == CLUSTER else arg for arg in argv[1:]]
+        result = subprocess.run([sys.executable, "-m", "cosim.cli", *args], cwd=tmp_path, capture_output=True,
+                                text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        line = " ".join(argv)
+        assert result.returncode == 0, f"{line}\n{result.stderr[-2000:]}"
+        assert "Traceback" not in result.stderr and "UserWarning" not in result.stderr, line
+        for name in written(argv):
+            assert (tmp_path / name).exists(), f"{line} did not write {name}"
+        outputs[line] = result.stdout
+    # the data file is a plain table another tool reads
+    data = pd.read_csv(tmp_path / "data.csv")
+    assert list(data.columns) == ["time", "Tm", "TL", "theta_m", "omega_m", "theta_L", "omega_L"]
+    assert json.loads((tmp_path / "data.meta.json").read_text())["units"]["theta_m"] == "rad"
+    np.testing.assert_array_equal(pd.read_csv(tmp_path / "replay.csv")["Tm"], data["Tm"])
+    # the identified model is stable, the MPC and the PID designed on it pass their specs on the FMU
+    model = json.loads((tmp_path / "model.json").read_text())
+    assert model["meta"]["stable"] is True
+    mpc = json.loads(next(out for line, out in outputs.items() if "mpc.json --scenario" in line))
+    assert mpc["passed"] is True and all(c["passed"] is not False for c in mpc["checks"])
+    pid = next(out for line, out in outputs.items() if "pid.json --robustness" in line)
+    assert pid.startswith("PASSED") and "pass rate 100.0%" in pid
+    diagnosis = json.loads(next(out for line, out in outputs.items() if "--report diagnosis.html" in line))
+    assert diagnosis["after"]["nrmse_pct"] <= diagnosis["before"]["nrmse_pct"]
+    two = next(out for line, out in outputs.items() if "run1.csv run2.csv" in line)
+    assert two.startswith("found coulomb_friction on omega_m")
+    fit = next(out for line, out in outputs.items() if line.startswith("cosim compare"))
+    assert all(float(v) > 85.0 for v in re.findall(r"fit (-?[\d.]+) %", fit))
+
+
+@pytest.mark.slow
+def test_the_python_example_runs(tmp_path, monkeypatch):
+    block = re.search(r"From Python:\n\n```python\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
+    assert block, "the README has no Python example"
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    exec(compile(block.group(1), "README.md", "exec"), namespace)  # noqa: S102 - the README's own example
+    assert (tmp_path / "data.parquet").is_file()
+    assert namespace["y"][2] == pytest.approx(0.01, abs=2e-3)  # the proportional loop brought theta_L near 0.01
