@@ -136,3 +136,19 @@ def test_export_bad_input(model_file, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert_clean_error(run("export", str(bad), "--to", str(tmp_path / "m.mat")), "not a cosim model")
+
+
+def test_a_library_warning_prints_as_one_warning_line(tmp_path):
+    """Python's ``file:line: UserWarning:`` becomes one ``warning: ...`` line on stderr (here: a stale sidecar)."""
+    from cosim.data.trajectory import Trajectory
+
+    t = np.arange(5) * 0.1
+    Trajectory.from_arrays(t, {"a": t, "b": t}).write(tmp_path / "run.csv")
+    Trajectory.from_arrays(t, {"a": t}).write(tmp_path / "other.csv")
+    (tmp_path / "other.meta.json").replace(tmp_path / "run.meta.json")
+    result = subprocess.run([sys.executable, "-m", "cosim.cli", "data", "info", str(tmp_path / "run.csv")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.splitlines() == [
+        "warning: run.meta.json describes columns ['time', 'a'], not those of run.csv; its units, roles and meta "
+        "are ignored (rewrite or delete it)"]
