@@ -82,9 +82,11 @@ def main(argv: list[str] | None = None) -> dict:
                "runs": args.runs, "alone": alone, "loaded": loaded, "identical_verdicts": identical}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "verdict_under_load.json").write_text(json.dumps(summary, indent=1) + "\n")
-    rows = [f"| {'alone' if i == 0 else f'loaded {i}'} | {run['exit']} | {run['passed']} | "
-            f"{run['solve_time_us'].get('median', float('nan')):.2f} | {run['solve_time_us'].get('p99', float('nan')):.2f} |"
-            for i, run in enumerate([alone, *loaded])]
+    rows = []
+    for i, run in enumerate([alone, *loaded]):
+        times = run["solve_time_us"]
+        rows.append(f"| {'alone' if i == 0 else f'loaded {i}'} | {run['exit']} | {run['passed']} | "
+                    f"{times.get('median', float('nan')):.2f} | {times.get('p99', float('nan')):.2f} |")
     (args.out / "verdict_under_load.md").write_text(
         "# The same `cosim validate` under load\n\n"
         f"`cosim validate bundled pid.json --json` (default specs), alone then {args.runs} times beside "

@@ -53,6 +53,7 @@ from .data.simulation import simulate
 from .data.trajectory import Trajectory
 from .diagnose import DiagnosisReport, diagnose
 from .export import export_mat, to_statespace
+from .figures import COLOURS, FONT_SIZE, new_figure, save_figure
 from .identify.metrics import nrmse_fit_pct, r2
 from .identify.model import IdentifiedModel
 from .identify.sindyc import SINDYc
@@ -155,9 +156,10 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     measured = effect.with_noise(noise, seed=seed)
     data = measured.write(out / "data_friction_noisy.csv")
     clean.write(out / "data_clean.csv")
-    plot = plot_trajectory(measured, out / "simulation.png", label=f"Fc={friction:g} N m, {noise:.0%} noise",
-                           others=[("no friction", clean)],
-                           title="Bundled two-mass servo FMU: multisine 1-40 Hz, 20 % of max torque, from rest")
+    plot = out / "simulation.png"
+    plot_trajectory(measured, plot, label=f"with friction Fc={friction:g} N m, {noise:.0%} noise",
+                    others=[("no friction, no noise", clean, COLOURS["other"])],
+                    title="Bundled two-mass servo FMU: multisine 1-40 Hz, 20 % of max torque, from rest")
     _advance(bar, "identify")
     estimator = SINDYc(**STUDY_SETTINGS).fit(measured, states=list(STATES), inputs=["Tm"])
     model = estimator.model_
@@ -165,9 +167,10 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     export_mat(model, out / "statespace.mat")
     x0 = np.asarray(model.meta["x0"][0]) if "x0" in model.meta else measured[list(STATES)][0]
     sim = model.simulate(x0, measured[["Tm"]][:-1], dt=STUDY_DT)
-    fit_plot = plot_trajectory(measured.select(list(STATES)), out / "model_vs_data.png", label="measured",
-                               others=[("linear SINDYc model, free run", sim.to_trajectory())],
-                               title="Identified linear model against the data it lacks friction for")
+    fit_plot = out / "model_vs_data.png"
+    plot_trajectory(measured.select(list(STATES)), fit_plot, label="measured", errors=True,
+                    others=[("linear SINDYc model, free run", sim.to_trajectory(), COLOURS["before"])],
+                    title="Identified linear model against the data it lacks friction for")
     truth = effect[list(STATES)]
     fit = {"fit_r2": dict(zip(STATES, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
            "fit_nrmse_pct": dict(zip(STATES, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
@@ -252,11 +255,13 @@ def summary_lines(result: dict[str, Any]) -> list[str]:
 
 def _data_sections(part: Report, plot: Path, fit_plot: Path, model: Any, fit: dict[str, Any]) -> None:
     """The data and identification sections of the report."""
-    part.add_figure("Data from the FMU", plot, caption="Multisine torque from rest; with and without friction.")
+    part.add_figure("Data from the FMU", plot, caption="Multisine torque from rest, with friction and noise (the "
+                    "data, dark) and without either (purple); the torque is the same in both runs.")
     part.add_text("Identified linear model (SINDYc)", "\n\n".join(model.equations()))
     part.add_table(None, [{"state": k, "R2": fit["fit_r2"][k], "NRMSE fit %": fit["fit_nrmse_pct"][k]}
                           for k in fit["fit_r2"]], caption="free run of the model against the noise-free data")
-    part.add_figure(None, fit_plot, caption="The linear model lacks the friction.")
+    part.add_figure(None, fit_plot, caption="The linear model lacks the friction; under each state, the data minus "
+                    "the model's free run.")
 
 
 # ---------------------------------------------------------------------------------------------- diagnosis
@@ -288,6 +293,36 @@ def _diagnosis_stage(report: Report, model: IdentifiedModel, measured: Trajector
     return found, summary
 
 
+def _discrepancy_figure(runs: list[tuple[str, Any, Any]]) -> Any:
+    """Per controller, the load angle of the FMU loop (thick, light) with each model's prediction (thin, dark)
+    over it, and beside it each model's prediction error (FMU minus model)."""
+    fig = new_figure(figsize=(13, 3.0 * len(runs) + 0.8), layout="constrained")
+    axes = fig.subplots(len(runs), 2, sharex=True, squeeze=False)
+    models = (("linear model", "before", "-"), ("diagnosed model", "after", "--"))
+    for (ax, err), (name, on_linear, on_diagnosed) in zip(axes, runs, strict=True):
+        fmu_run = on_linear.fmu
+        ax.plot(fmu_run.time, fmu_run["r_theta_L"], color=COLOURS["reference"], ls=":", lw=0.9, label="reference")
+        ax.plot(fmu_run.time, fmu_run["theta_L"], color=COLOURS["fmu"], lw=6.0, alpha=0.22, solid_capstyle="butt",
+                label="FMU (friction on)")
+        for (label, key, style), run in zip(models, (on_linear, on_diagnosed), strict=True):
+            ax.plot(run.model.time, run.model["theta_L"], color=COLOURS[key], lw=1.1, ls=style, label=label)
+            k = min(len(run.model), len(fmu_run))
+            err.plot(fmu_run.time[:k], fmu_run["theta_L"][:k] - run.model["theta_L"][:k], color=COLOURS[key],
+                     lw=1.1, ls=style, label=label)
+        err.axhline(0.0, color=COLOURS["reference"], lw=0.5)
+        ax.set_ylabel("theta_L [rad]", fontsize=FONT_SIZE + 1)
+        ax.set_title(f"{name.upper()} designed on the linear model: the loop and its predictions",
+                     fontsize=FONT_SIZE + 1)
+        err.set_ylabel("FMU − model [rad]", fontsize=FONT_SIZE + 1)
+        err.set_title("prediction error of the load angle", fontsize=FONT_SIZE + 1)
+        for a in (ax, err):
+            a.grid(alpha=0.3)
+            a.legend(fontsize=FONT_SIZE, loc="lower right")
+    for a in axes[-1]:
+        a.set_xlabel("time [s]", fontsize=FONT_SIZE + 1)
+    return fig
+
+
 # ---------------------------------------------------------------------------------------------- control
 def _designs(sys_c: Any) -> dict[str, Any]:
     """A PID (motor-speed feedback) and an MPC designed on the continuous StateSpace `sys_c`."""
@@ -310,7 +345,8 @@ def _validated(report: Report, label: str, controller: Any, fmu: Path, out: Path
     controller.save(out / f"{file_stem}.json")
     verdict = validate(fmu, controller, DEMO_SCENARIOS, TELESCOPE_SPECS, parameters={"Fc": friction}, model=model,
                        progress=False)
-    pngs = [plot_closed_loop(result, out / f"closed_loop_{file_stem}_{i}.png", title=f"{label}: {s.name}")
+    pngs = [save_figure(plot_closed_loop(result, title=f"{label}: {s.name}"),
+                        out / f"closed_loop_{file_stem}_{i}.png", close=False)
             for i, (s, result) in enumerate(zip(verdict.scenarios, verdict.results, strict=True), start=1)]
     rows = [{"scenario": c["scenario"], "spec": c["spec"],
              "value": "n/a" if c["value"] is None else float(f"{c['value']:.4g}"),
@@ -432,14 +468,9 @@ def _comparison_section(report: Report, linear: dict[str, Any], diagnosed: dict[
 def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: IdentifiedModel, fmu: Path, out: Path,
                        *, friction: float) -> dict[str, dict[str, float]]:
     """How well the linear and the diagnosed model predict the FMU loop of the controllers on the linear model."""
-    from .figures import pyplot, save_figure
-
-    plt = pyplot()
-
     step = DEMO_SCENARIOS[0]
-    summary, rows = {}, []
-    fig, axes = plt.subplots(len(linear), 2, sharex=True, figsize=(12, 2.6 * len(linear) + 0.6), squeeze=False)
-    for (ax, err), (name, entry) in zip(axes, linear.items(), strict=True):
+    summary, rows, runs = {}, [], []
+    for name, entry in linear.items():
         on_linear = entry["verdict"].results[0]
         on_diagnosed = closed_loop(entry["controller"], fmu, duration=step.duration, reference=step.reference,
                                    parameters={"Fc": friction}, model=diagnosed_model, t_event=step.at, band=step.band,
@@ -454,26 +485,8 @@ def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: 
                      "linear model: % of step": float(f"{lin['model_discrepancy_pct']:.3g}"),
                      "diagnosed model: RMS [rad]": float(f"{dia['model_discrepancy_rms']:.3g}"),
                      "diagnosed model: % of step": float(f"{dia['model_discrepancy_pct']:.3g}")})
-        fmu_run = on_linear.fmu
-        ax.plot(fmu_run.time, fmu_run["r_theta_L"], "k--", lw=0.8, label="reference")
-        ax.plot(fmu_run.time, fmu_run["theta_L"], lw=1.4, label="FMU (friction on)")
-        ax.plot(on_linear.model.time, on_linear.model["theta_L"], lw=0.9, label="linear model")
-        ax.plot(on_diagnosed.model.time, on_diagnosed.model["theta_L"], lw=0.9, ls="-.", label="diagnosed model")
-        ax.set_ylabel("theta_L [rad]", fontsize=8)
-        ax.set_title(f"{name.upper()} designed on the linear model: the loop and its predictions", fontsize=9)
-        for label, run, style in (("linear model", on_linear, "-"), ("diagnosed model", on_diagnosed, "-.")):
-            k = min(len(run.model), len(fmu_run))
-            err.plot(fmu_run.time[:k], fmu_run["theta_L"][:k] - run.model["theta_L"][:k], ls=style, lw=0.9,
-                     label=label)
-        err.set_ylabel("FMU - model [rad]", fontsize=8)
-        err.set_title("prediction error of the load angle", fontsize=9)
-        for a in (ax, err):
-            a.grid(alpha=0.3)
-            a.legend(fontsize=8, loc="lower right")
-    axes[-1, 0].set_xlabel("time [s]")
-    axes[-1, 1].set_xlabel("time [s]")
-    fig.tight_layout()
-    png = save_figure(fig, out / "model_vs_fmu_loop.png")
+        runs.append((name, on_linear, on_diagnosed))
+    png = save_figure(_discrepancy_figure(runs), out / "model_vs_fmu_loop.png", close=False)
     report.add_table("Which model predicts the real loop: model-versus-FMU discrepancy", rows,
                      caption=f"{step.name}: the same controller against the FMU with friction and against each model "
                              "(RMS of the load-angle difference)")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import html
+import io
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -27,7 +28,7 @@ from typing import Any
 
 from .files import write_text_atomic
 
-__all__ = ["Report"]
+__all__ = ["Report", "html_table"]
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }
@@ -41,10 +42,55 @@ img { max-width: 100%; } .note { color: #555; font-size: 0.9em; }
 """
 
 
+#: Cell colours of a good and a bad mark (inline too, so a notebook shows them without the report's style).
+_MARKS = {True: ("good", "#e3f6e3"), False: ("bad", "#fbe3e3")}
+
+
 def _cell(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return html.escape(str(value))
+
+
+def html_table(rows: Sequence[Mapping[str, Any]] | Any, *, caption: str = "",
+               highlight: Mapping[tuple[int, str], bool] | None = None) -> str:
+    """An HTML table of `rows` (the report's tables, and the ``_repr_html_`` of cosim's results in Jupyter).
+
+    Parameters
+    ----------
+    rows : sequence of dict, or pandas.DataFrame
+        One dict per row; the columns are the keys in the order first seen.
+    caption : str
+    highlight : mapping of (row index, column) to bool, optional
+        Cells marked good (True, green) or bad (False, red).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> html_table([{"state": "x", "r2": 0.5}], caption="fit", highlight={(0, "r2"): False})
+    '<table><caption>fit</caption><thead><tr><th>state</th><th>r2</th></tr></thead><tbody><tr><td>x</td><td \
+class="bad" style="background:#fbe3e3">0.5</td></tr></tbody></table>'
+    """
+    if hasattr(rows, "to_dict"):
+        rows = rows.reset_index().to_dict("records") if rows.index.name else rows.to_dict("records")
+    rows = list(rows)
+    if not rows:
+        return "<p>(no rows)</p>"
+    columns = list(dict.fromkeys(key for row in rows for key in row))
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
+    body = []
+    for i, row in enumerate(rows):
+        cells = []
+        for c in columns:
+            mark = (highlight or {}).get((i, c))
+            css = "" if mark is None else ' class="{}" style="background:{}"'.format(*_MARKS[bool(mark)])
+            cells.append(f"<td{css}>{_cell(row.get(c, ''))}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 class Report:
@@ -66,34 +112,33 @@ class Report:
     def add_table(self, heading: str | None, rows: Sequence[Mapping[str, Any]] | Any, *, caption: str = "",
                   highlight: Mapping[tuple[int, str], bool] | None = None) -> None:
         """A table from a list of dicts (or a pandas DataFrame); `highlight` marks cells good/bad."""
-        if hasattr(rows, "to_dict"):
-            rows = rows.reset_index().to_dict("records") if rows.index.name else rows.to_dict("records")
-        rows = list(rows)
         if heading:
             self._parts.append(f"<h2>{html.escape(heading)}</h2>")
-        if not rows:
-            self._parts.append("<p>(no rows)</p>")
-            return
-        columns = list(dict.fromkeys(key for row in rows for key in row))
-        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in columns)
-        body = []
-        for i, row in enumerate(rows):
-            cells = []
-            for c in columns:
-                mark = (highlight or {}).get((i, c))
-                css = "" if mark is None else (' class="good"' if mark else ' class="bad"')
-                cells.append(f"<td{css}>{_cell(row.get(c, ''))}</td>")
-            body.append("<tr>" + "".join(cells) + "</tr>")
-        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-        self._parts.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>")
+        self._parts.append(html_table(rows, caption=caption, highlight=highlight))
 
-    def add_figure(self, heading: str | None, png: str | os.PathLike, *, caption: str = "") -> None:
-        """A PNG file, embedded."""
-        data = base64.b64encode(Path(png).read_bytes()).decode("ascii")
+    def add_figure(self, heading: str | None, png: str | os.PathLike | Any, *, caption: str = "",
+                   alt: str | None = None) -> None:
+        """A figure, embedded: a PNG file, or a matplotlib Figure (rendered as PNG in memory).
+
+        Parameters
+        ----------
+        heading : str or None
+        png : path-like or matplotlib.figure.Figure
+        caption : str
+        alt : str, optional
+            The image's alternative text (default: the file's name, or "figure").
+        """
+        if hasattr(png, "savefig"):
+            buffer = io.BytesIO()
+            png.savefig(buffer, format="png", dpi=110)
+            raw, name = buffer.getvalue(), "figure"
+        else:
+            raw, name = Path(png).read_bytes(), Path(png).name
+        data = base64.b64encode(raw).decode("ascii")
         if heading:
             self._parts.append(f"<h2>{html.escape(heading)}</h2>")
         cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-        self._parts.append(f'<figure><img alt="{html.escape(Path(png).name)}" src="data:image/png;base64,{data}">'
+        self._parts.append(f'<figure><img alt="{html.escape(alt or name)}" src="data:image/png;base64,{data}">'
                            f"{cap}</figure>")
 
     def render(self) -> str:

@@ -75,3 +75,13 @@ def test_one_report_and_the_summary(demo):
     assert {"passed", "settling_time", "overshoot_pct", "steady_state_error", "file"} <= set(demo["controllers"]["mpc"])
     lines = "\n".join(summary_lines(demo))
     assert "diagnosis: found coulomb_friction on omega_m" in lines and "PID + compensation designed on" in lines
+
+
+@pytest.mark.slow
+def test_every_figure_of_the_demo_is_a_png(demo):
+    loops = [p for group in ("controllers", "controllers_diagnosed") for c in demo[group].values() for p in c["plots"]]
+    pngs = [demo["plot"], demo["model_plot"], *demo["diagnosis"]["plots"], *loops]
+    assert len(pngs) == 2 + 4 + 8
+    for png in pngs:
+        with open(png, "rb") as file:
+            assert file.read(8) == b"\x89PNG\r\n\x1a\n", png

@@ -4,11 +4,13 @@ import math
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from cosim import build_fmu, simulate
 from cosim.data.trajectory import Trajectory
 from cosim.diagnose.residuals import correlation_tests, residuals
 from cosim.errors import DataError, UnknownVariableError
+from cosim.figures import COLOURS
 from cosim.identify.model import IdentifiedModel
 from cosim.study.paper import STATES, STUDY_DT, two_mass_matrices
 
@@ -95,8 +97,15 @@ def test_friction_the_model_lacks_shows_in_every_residual(true_model, fmu_runs):
 
 def test_residual_plot_and_summary(true_model, fmu_runs, tmp_path):
     res = residuals(true_model, fmu_runs[1])
-    png = res.plot(tmp_path / "resid.png")
-    assert png.stat().st_size > 20_000
+    fig = res.plot(tmp_path / "resid.png", colour=COLOURS["before"])
+    assert isinstance(fig, Figure) and (tmp_path / "resid.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "resid.png").stat().st_size > 20_000
+    assert fig.axes[0].get_ylabel() == "theta_m\nresidual [rad]"
+    assert fig.axes[3].get_ylabel() == "omega_m\nresidual [rad/s]"
+    assert fig.axes[-3].get_xlabel() == "time [s]"
+    free_run = fig.axes[0].get_lines()[-1]
+    assert free_run.get_label() == "free run" and free_run.get_color() == COLOURS["before"]
+    assert res.plot().axes[0].get_lines()[-1].get_color() == COLOURS["model"]  # no path: nothing written, a Figure
     summary = res.summary()
     assert summary["white"] is False and set(summary["rms"]) == {"equation", "one_step", "free_run"}
 

@@ -111,6 +111,16 @@ def test_records_and_table(reference):
     assert math.isnan(table["amplitude"][FAILING]) and table["seed"].tolist() == [1, 1, 2, 2, 3]
 
 
+def test_jupyter_shows_the_counts_and_the_records(reference):
+    text = reference._repr_html_()
+    assert text.startswith("<table>") and "5 cases, 1 failed" in text and "in-process" in text
+    assert text.count("<tr>") == 1 + len(CASES) and "noise level must be &gt;= 0" in text
+    assert 'class="bad"' in text  # the failed case's error cell is marked
+    many = SweepResult(cases=[{"i": i} for i in range(12)], results=[{"v": [1, 2, 3]}] * 12, errors=[None] * 12)
+    text = many._repr_html_()
+    assert text.count("<tr>") == 11 and "the first 10 shown" in text and "[3 values]" in text
+
+
 def test_clashing_names_are_prefixed():
     sweep = SweepResult(cases=[{"seed": 1, "error": "case's own"}], results=[{"seed": 7, "value": 1.0}],
                         errors=[None])

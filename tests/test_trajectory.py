@@ -349,6 +349,6 @@ def test_from_pandas_takes_a_time_column_or_a_time_index(traj):
 
 def test_plot_returns_a_figure_with_units_and_writes_it_when_asked(tmp_path, traj):
     fig = traj.plot(["Tm", "theta_m"], path=tmp_path / "p.png", title="run")
-    assert [ax.get_ylabel() for ax in fig.axes] == ["Tm\n[N.m]", "theta_m\n[rad]"]
+    assert [ax.get_ylabel() for ax in fig.axes] == ["Tm\n[N m]", "theta_m\n[rad]"]
     assert fig.axes[-1].get_xlabel() == "time [s]"
     assert (tmp_path / "p.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -131,6 +131,9 @@ def test_verdict_gives_reasons_and_the_assertion_prints_them(fmu):
     data = json.loads(json.dumps(verdict.to_dict()))
     assert data["passed"] is False and set(data["solve_time_us"]) >= {"median", "p99"}
     assert set(data["metrics"]) == {s.name for s in verdict.scenarios}
+    text = verdict._repr_html_()   # Jupyter's view: a table of the checks, the failed ones marked
+    assert text.startswith("<table>") and "FAILED" in text and "NOT MET" in text and 'class="bad"' in text
+    assert text.count("<tr>") == 1 + len(verdict.checks) and "steady_state_error" in text
 
 
 def test_assert_meets_passes_quietly_when_specs_hold(fmu):
@@ -168,6 +171,9 @@ def test_robustness_finds_the_plants_where_specs_fail(fmu):
         assert worst["score"] == pytest.approx(scores.max())
     for name, value in worst["parameters"].items():
         assert abs(value / rob.nominal[name] - 1) <= 0.4 + 1e-12
+    text = rob._repr_html_()
+    assert text.startswith("<table>") and f"6 plants, pass rate {rob.pass_rate:.1%}" in text
+    assert "nominal" in text and "worst" in text and "KL" in text
     again = robustness(fmu, StateFeedback(), "step:amp=0.01,duration=1.2", ["settling_time<=0.7"], samples=6,
                        spread=0.4, workers=1, progress=False, seed=3)
     np.testing.assert_array_equal(again.table["KL"], rob.table["KL"])  # same seed, same plants

@@ -14,17 +14,20 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..data.trajectory import Trajectory
 from ..identify.metrics import max_deviation_pct, nrmse_fit_pct, r2
 from ..identify.model import IdentifiedModel
-from ..report import Report
+from ..report import Report, html_table
 from ._holdout import HELD_OUT_T
 from .candidates import EffectCandidate
 from .residuals import ResidualAnalysis
+
+if TYPE_CHECKING:
+    import matplotlib.figure
 
 __all__ = ["DiagnosisReport"]
 
@@ -103,33 +106,90 @@ class DiagnosisReport:
                 "analysis": dict(self.analysis),
                 "equations_after": self.model_after.equations()}
 
-    def plot_evidence(self, path: str | os.PathLike) -> Path:
-        """PNG: for each accepted effect (or the top candidate), the equation residual of its row against the
-        signal it attaches to, before and after: friction shows as a step at zero speed that disappears."""
-        from ..figures import pyplot, save_figure
+    def plot_evidence(self, path: str | os.PathLike | None = None, *, bins: int = 30) -> matplotlib.figure.Figure:
+        """For each accepted effect (or the top candidate), the residuals of its row against the signal it
+        attaches to, before and after, averaged in bins: friction shows as a step at zero speed (or, once a
+        linear model has taken part of it up as damping, a slope) that disappears.
 
-        plt = pyplot()
+        Two panels per effect: the equation residual (what the right-hand side misses; on noisy data the
+        derivative's noise can bury it) and the free-run residual (what the simulation misses). Each bin of the
+        signal is a point at the mean residual with an error bar of ± one standard deviation (the spread).
+
+        Parameters
+        ----------
+        path : path-like, optional
+            Write the figure there as PNG too.
+        bins : int
+            Number of equal bins over the range of the signal.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from ..figures import FONT_SIZE, finish, new_figure
 
         shown = list(self.effects) or list(self.ranking[:1])
-        fig, axes = plt.subplots(1, max(len(shown), 1), figsize=(5.5 * max(len(shown), 1), 4.2), squeeze=False)
-        for ax, cand in zip(axes[0], shown, strict=False):
+        fig = new_figure(figsize=(12, 4.0 * max(len(shown), 1) + 0.4), layout="constrained")
+        axes = fig.subplots(max(len(shown), 1), 2, squeeze=False)
+        for (eq_ax, run_ax), cand in zip(axes, shown, strict=False):
             row = cand.rows[0] if cand.rows else self.model_before.states[-1]
             i = self.model_before.states.index(row)
-            signal_name = cand.attached_to.split("-")[0] if cand.attached_to != "constant" else None
-            x_data = self.data[signal_name][:-1] if self.data is not None and signal_name in self.data.names else \
-                self.residuals_before.time[1:]
-            step = max(1, len(x_data) // 6000)
-            ax.plot(x_data[::step], self.residuals_before.equation[::step, i], ".", ms=1.5, alpha=0.5,
-                    label="before (model without it)")
-            ax.plot(x_data[::step], self.residuals_after.equation[::step, i], ".", ms=1.5, alpha=0.5,
-                    label="after (model with it)")
-            ax.set_xlabel(signal_name or "time [s]")
-            ax.set_ylabel(f"equation residual of {row}'")
-            ax.set_title(f"{cand.name} on {cand.attached_to}", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8, markerscale=5)
-        fig.tight_layout()
-        return save_figure(fig, path)
+            signal = cand.attached_to.split("-")[0] if cand.attached_to != "constant" else None
+            if self.data is not None and signal in self.data.names:
+                x, x_label = self.data[signal], _label(self.data, signal)
+            else:
+                x, x_label = self.residuals_before.time, "time [s]"
+            unit = _unit(self.data, row)
+            panels = ((eq_ax, "equation", x[:-1], f"equation residual of {row}'", _per_second(unit)),
+                      (run_ax, "free_run", x, f"free-run residual of {row}", unit))
+            for ax, kind, where, what, what_unit in panels:
+                for j, (key, res) in enumerate((("before", self.residuals_before), ("after", self.residuals_after))):
+                    _binned(ax, where, getattr(res, kind)[:, i], bins, key, shift=(j - 0.5) * 0.25)
+                ax.axhline(0.0, color="k", lw=0.6)
+                ax.set_xlabel(x_label, fontsize=FONT_SIZE + 1)
+                ax.set_ylabel(f"{what} [{what_unit}]" if what_unit else what, fontsize=FONT_SIZE)
+                ax.set_title(f"{cand.name} on {cand.attached_to}: {what}", fontsize=FONT_SIZE + 1)
+                ax.grid(alpha=0.3)
+                ax.legend(fontsize=FONT_SIZE)
+        return finish(fig, path)
+
+    def plot_free_run(self, path: str | os.PathLike | None = None) -> matplotlib.figure.Figure | None:
+        """The data and the free runs of the model before and after, with their errors under each state.
+
+        Parameters
+        ----------
+        path : path-like, optional
+            Write the figure there as PNG too.
+
+        Returns
+        -------
+        matplotlib.figure.Figure or None
+            None without data (a report read back from JSON).
+        """
+        from ..data.plots import plot_trajectory
+        from ..figures import COLOURS
+
+        if self.data is None:
+            return None
+        sims = []
+        for label, model in (("before", self.model_before), ("after", self.model_after)):
+            sim = _free_run(model, self.data)
+            if sim is not None:
+                sims.append((f"model {label}", sim, COLOURS[label]))
+        return plot_trajectory(self.data.select(list(self.model_before.states)), path, label="data", others=sims,
+                               errors=True, title="Free run of the model before and after, against the data")
+
+    def _repr_html_(self) -> str:
+        """Jupyter's view: the effects found and the error before and after, as two small tables."""
+        effects = [{"effect": e.name, "attached to": e.attached_to,
+                    **{k: f"{v:.5g}" + (f" ± {e.uncertainty[k]:.2g}" if k in e.uncertainty else "")
+                       for k, v in e.parameters.items()}} for e in self.effects] or [{"effect": "none found"}]
+        errors = [{"": label, "NRMSE %": _number(figures.get("nrmse_pct")), "R²": _number(figures.get("r2"), 6),
+                   "max dev %": _number(figures.get("max_dev_pct")), "white": figures.get("white")}
+                  for label, figures in (("before", self.before), ("after", self.after))]
+        marks = {(k, "white"): bool(row["white"]) for k, row in enumerate(errors)}
+        return (f"<div>{html_table(effects, caption='Diagnosis: ' + self.message)}"
+                f"{html_table(errors, caption='free-run error against the data', highlight=marks)}</div>")
 
     def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis") -> Path:
         """One HTML file: the verdict, the ranking, the parameters, before/after figures and the plots."""
@@ -164,7 +224,7 @@ class DiagnosisReport:
         list of Path
             The PNG files written.
         """
-        from ..data.plots import plot_trajectory
+        from ..figures import COLOURS, save_figure
 
         stem = Path(stem)
         pngs: list[Path] = []
@@ -193,26 +253,54 @@ class DiagnosisReport:
         report.add_table("Candidates (first round)", [
             {"effect": c.name, "attached to": c.attached_to, "nuisance": c.nuisance, "delta BIC": round(c.delta_bic, 1),
              "p-value": float(f"{c.p_value:.3g}"), "significant": c.significant} for c in self.ranking])
-        pngs.append(Path(self.plot_evidence(f"{stem}_evidence.png")))
-        report.add_figure("Evidence", pngs[-1])
-        pngs.append(Path(self.residuals_before.plot(f"{stem}_residuals_before.png")))
-        report.add_figure("Residuals before", pngs[-1])
-        pngs.append(Path(self.residuals_after.plot(f"{stem}_residuals_after.png")))
-        report.add_figure("Residuals after", pngs[-1])
-        if self.data is not None:
-            sims = []
-            for label, model in (("before", self.model_before), ("after", self.model_after)):
-                sim = _free_run(model, self.data)
-                if sim is not None:
-                    sims.append((f"model {label}", sim))
-            pngs.append(Path(plot_trajectory(self.data.select(list(self.model_before.states)), f"{stem}_free_run.png",
-                                             label="data", others=sims)))
-            report.add_figure("Free run against the data", pngs[-1])
+        figures = [("Evidence", "evidence", self.plot_evidence(),
+                    "binned means ± one standard deviation of the residuals of the effect's row, against the "
+                    "signal it attaches to"),
+                   ("Residuals before", "residuals_before", self.residuals_before.plot(colour=COLOURS["before"]), ""),
+                   ("Residuals after", "residuals_after", self.residuals_after.plot(colour=COLOURS["after"]), ""),
+                   ("Free run against the data", "free_run", self.plot_free_run(),
+                    "error: the data minus each model's free run")]
+        for heading, name, fig, caption in figures:
+            if fig is not None:
+                pngs.append(save_figure(fig, f"{stem}_{name}.png", close=False))
+                report.add_figure(heading, pngs[-1], caption=caption)
         report.add_text("Equations after", "\n\n".join(self.model_after.equations()))
         return pngs
 
 
-# ---------------------------------------------------------------------------------------------- free-run figures
+# ---------------------------------------------------------------------------------------------- figures
+def _unit(data: Trajectory | None, name: str) -> str:
+    return data.units[data.names.index(name)] if data is not None and name in data.names else ""
+
+
+def _label(data: Trajectory, name: str) -> str:
+    from ..figures import axis_label
+
+    return axis_label(name, _unit(data, name))
+
+
+def _per_second(unit: str) -> str:
+    """The unit of a derivative: ``rad/s`` -> ``rad/s²``, ``rad`` -> ``rad/s``."""
+    if not unit:
+        return ""
+    return unit[:-2] + "/s²" if unit.endswith("/s") else f"{unit}/s"
+
+
+def _number(value: Any, digits: int = 4) -> Any:
+    return "n/a" if value is None else float(f"{value:.{digits}g}")
+
+
+def _binned(ax: Any, x: np.ndarray, y: np.ndarray, bins: int, key: str, *, shift: float = 0.0) -> None:
+    """`y` against `x` as binned means ± one standard deviation, in the colour of `key` (before, after)."""
+    from ..figures import COLOURS, binned_mean
+
+    centre, mean, std, _ = binned_mean(x, y, bins)
+    width = float(np.min(np.diff(centre))) if len(centre) > 1 else 0.0
+    label = {"before": "before (model without it)", "after": "after (model with it)"}[key]
+    ax.errorbar(centre + shift * width, mean, yerr=std, fmt="o", ms=4, lw=0.9, capsize=2, color=COLOURS[key],
+                label=label)
+
+
 def _x0(model: IdentifiedModel, data: Trajectory) -> np.ndarray:
     meta_x0 = model.meta.get("x0") if isinstance(model.meta, Mapping) else None
     if meta_x0:

@@ -52,8 +52,7 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
@@ -61,6 +60,9 @@ from scipy import stats
 from ..data.trajectory import Trajectory
 from ..errors import DataError, UnknownVariableError
 from ..identify.model import IdentifiedModel
+
+if TYPE_CHECKING:
+    import matplotlib.figure
 
 __all__ = ["RESIDUAL_KINDS", "ResidualAnalysis", "ResidualTests", "correlation_tests", "residuals"]
 
@@ -200,6 +202,8 @@ class ResidualAnalysis:
         Which residual the tests are on (``"free_run"`` by default).
     free_run_status : str
         ``"ok"`` or ``"diverged"``.
+    units : tuple of str
+        The unit of each state (of its free-run and one-step residuals); empty where unknown.
     """
 
     time: np.ndarray
@@ -211,6 +215,7 @@ class ResidualAnalysis:
     tests: dict[str, ResidualTests]
     tested: str
     free_run_status: str
+    units: tuple[str, ...] = ()
 
     @property
     def white(self) -> bool:
@@ -235,48 +240,64 @@ class ResidualAnalysis:
                 "free_run_status": self.free_run_status, "rms": self.rms(),
                 "tests": {name: t.summary() for name, t in self.tests.items()}}
 
-    def plot(self, path: str | os.PathLike, *, title: str | None = None) -> Path:
-        """PNG: per state, the three residuals against time, the autocorrelation and the input cross-correlation
-        with their confidence bounds (as MATLAB ``resid`` draws them)."""
-        from ..figures import pyplot, save_figure
+    def plot(self, path: str | os.PathLike | None = None, *, title: str | None = None,
+             colour: str | None = None) -> matplotlib.figure.Figure:
+        """Per state, the free-run and one-step residuals against time, the autocorrelation and the input
+        cross-correlation with their confidence bounds (as MATLAB ``resid`` draws them).
 
-        plt = pyplot()
+        Parameters
+        ----------
+        path : path-like, optional
+            Write the figure there as PNG too.
+        title : str, optional
+        colour : str, optional
+            Colour of the model's residuals (:data:`cosim.figures.COLOURS`: ``"before"`` or ``"after"`` in a
+            diagnosis; default ``"model"``); the one-step residual is drawn light grey under the free run.
 
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from ..figures import COLOURS, FONT_SIZE, axis_label, finish, new_figure
+
+        colour = colour or COLOURS["model"]
         n = len(self.states)
-        fig, axes = plt.subplots(n, 3, figsize=(13, 2.3 * n + 0.8), squeeze=False)
+        fig = new_figure(figsize=(13, 2.3 * n + 0.9), layout="constrained")
+        axes = fig.subplots(n, 3, squeeze=False)
         for i, name in enumerate(self.states):
+            unit = self.units[i] if i < len(self.units) else ""
             ax = axes[i, 0]
-            for kind, values, t in (("free run", self.free_run[:, i], self.time),
-                                    ("one step", self.one_step[:, i], self.time[1:])):
-                ax.plot(t, values, lw=0.6, label=kind)
-            ax.set_ylabel(f"{name}\nresidual", fontsize=8)
-            ax.legend(fontsize=7, loc="upper right")
+            ax.plot(self.time[1:], self.one_step[:, i], lw=0.6, color="0.65", label="one step")
+            ax.plot(self.time, self.free_run[:, i], lw=0.7, color=colour, label="free run")
+            ax.set_ylabel(axis_label(f"{name}\nresidual", unit), fontsize=FONT_SIZE)
+            ax.legend(fontsize=FONT_SIZE, loc="upper right")
             tests = self.tests[name]
             ax = axes[i, 1]
-            ax.bar(tests.lags, tests.autocorrelation, width=0.6)
-            ax.axhline(tests.bound, color="r", ls=":", lw=0.8)
-            ax.axhline(-tests.bound, color="r", ls=":", lw=0.8)
+            ax.bar(tests.lags, tests.autocorrelation, width=0.6, color=colour)
+            for sign in (1, -1):
+                ax.axhline(sign * tests.bound, color=COLOURS["limit"], ls=":", lw=0.9)
             ax.set_title(f"autocorrelation ({'white' if tests.white else 'NOT white'}, "
-                         f"p={tests.ljung_box_p:.2g})", fontsize=8)
+                         f"p={tests.ljung_box_p:.2g})", fontsize=FONT_SIZE)
             ax = axes[i, 2]
-            for input_name, ccf in tests.cross_correlation.items():
-                ax.plot(tests.cross_lags, ccf, ".-", lw=0.7, ms=2, label=input_name)
+            for k, (input_name, ccf) in enumerate(tests.cross_correlation.items()):
+                ax.plot(tests.cross_lags, ccf, ".-", lw=0.8, ms=2.5, label=input_name,
+                        color=colour if k == 0 else f"C{(k + 4) % 10}")
                 bound = tests.cross_bound[input_name]
                 if math.isfinite(bound):
-                    ax.axhline(bound, color="r", ls=":", lw=0.8)
-                    ax.axhline(-bound, color="r", ls=":", lw=0.8)
+                    for sign in (1, -1):
+                        ax.axhline(sign * bound, color=COLOURS["limit"], ls=":", lw=0.9)
             ax.set_title(f"cross-correlation with inputs ({'independent' if tests.independent else 'CORRELATED'})",
-                         fontsize=8)
+                         fontsize=FONT_SIZE)
             if tests.cross_correlation:
-                ax.legend(fontsize=7)
+                ax.legend(fontsize=FONT_SIZE)
         for ax in axes.flat:
             ax.grid(alpha=0.3)
-        axes[-1, 0].set_xlabel("time [s]")
-        axes[-1, 1].set_xlabel("lag [samples]")
-        axes[-1, 2].set_xlabel("lag [samples] (input leads at > 0)")
-        fig.suptitle(title or f"Residuals of the model ({self.tested.replace('_', '-')} error tested)")
-        fig.tight_layout()
-        return save_figure(fig, path)
+        axes[-1, 0].set_xlabel("time [s]", fontsize=FONT_SIZE + 1)
+        axes[-1, 1].set_xlabel("lag [samples]", fontsize=FONT_SIZE + 1)
+        axes[-1, 2].set_xlabel("lag [samples] (input leads at > 0)", fontsize=FONT_SIZE + 1)
+        fig.suptitle(title or f"Residuals of the model ({self.tested.replace('_', '-')} error tested)",
+                     fontsize=FONT_SIZE + 2)
+        return finish(fig, path)
 
 
 def _one_step(model: IdentifiedModel, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
@@ -365,4 +386,5 @@ def residuals(model: IdentifiedModel, data: Trajectory, *, tested: str = "free_r
                                         confidence=confidence)
     return ResidualAnalysis(time=data.time, states=model.states, inputs=model.inputs, equation=equation,
                             one_step=one_step, free_run=free_run, tests=tests, tested=tested,
-                            free_run_status=sim.status)
+                            free_run_status=sim.status,
+                            units=tuple(data.units[data.names.index(name)] for name in model.states))

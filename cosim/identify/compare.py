@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import html
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +42,9 @@ from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError, UnknownVariableError
 from .metrics import k_step_ahead_predictions, nrmse_fit_pct, r2
 from .model import IdentifiedModel
+
+if TYPE_CHECKING:
+    import matplotlib.figure
 
 __all__ = ["Comparison", "compare"]
 
@@ -79,37 +83,42 @@ class Comparison:
         return {**clean, "horizon": self.horizon, "x0": dict(self.x0),
                 "samples": len(self.measured)}
 
-    def plot(self, path: Any = None) -> Any:
-        """A Figure: each state measured and predicted, with the error under it; written as PNG to `path` if
-        given."""
-        from ..figures import new_figure, save_figure
+    def plot(self, path: str | os.PathLike | None = None) -> matplotlib.figure.Figure:
+        """Each state measured (thin, dark, on top) and predicted, with the error (measured minus model) under it.
+
+        Parameters
+        ----------
+        path : path-like, optional
+            Write the figure there as PNG too.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from ..figures import COLOURS, FONT_SIZE, axis_label, finish, new_figure
 
         names = list(self.fit_pct)
-        fig = new_figure(figsize=(9, 2.4 * len(names) + 0.6))
+        fig = new_figure(figsize=(9, 2.4 * len(names) + 0.8), layout="constrained")
         axes = fig.subplots(2 * len(names), 1, sharex=True, squeeze=False,
                             gridspec_kw={"height_ratios": [3, 1] * len(names)})[:, 0]
         t = self.measured.time
         for i, name in enumerate(names):
             unit = self.measured.units[self.measured.names.index(name)]
-            label = f"{name} [{unit}]" if unit else name
             top, bottom = axes[2 * i], axes[2 * i + 1]
-            top.plot(t, self.predicted[name], color="C0", lw=1.2, alpha=0.8,
+            top.plot(t, self.predicted[name], color=COLOURS["model"], lw=1.6, alpha=0.85, zorder=2,
                      label=f"model (fit {self.fit_pct[name]:.1f} %)")
-            top.plot(t, self.measured[name], color="0.2", lw=0.6, zorder=3, label="measured")
-            top.set_ylabel(label, fontsize=8)
-            top.legend(fontsize=7, loc="upper right")
-            bottom.plot(t, self.measured[name] - self.predicted[name], color="C3", lw=0.7)
-            bottom.axhline(0.0, color="0.6", lw=0.5)
-            bottom.set_ylabel("error", fontsize=8)
+            top.plot(t, self.measured[name], color=COLOURS["measured"], lw=0.7, zorder=3, label="measured")
+            top.set_ylabel(axis_label(name, unit), fontsize=FONT_SIZE)
+            top.legend(fontsize=FONT_SIZE, loc="upper right")
+            bottom.plot(t, self.measured[name] - self.predicted[name], color=COLOURS["model"], lw=0.8)
+            bottom.axhline(0.0, color=COLOURS["reference"], lw=0.5)
+            bottom.set_ylabel(axis_label("error", unit), fontsize=FONT_SIZE)
             for ax in (top, bottom):
                 ax.grid(alpha=0.3)
-        axes[-1].set_xlabel("time [s]")
+        axes[-1].set_xlabel("time [s]", fontsize=FONT_SIZE + 1)
         what = "free run" if self.horizon is None else f"{self.horizon}-step-ahead prediction"
-        fig.suptitle(f"model against data: {what}", fontsize=10)
-        fig.tight_layout()
-        if path is not None:
-            save_figure(fig, path, close=False)
-        return fig
+        fig.suptitle(f"model against data: {what}", fontsize=FONT_SIZE + 2)
+        return finish(fig, path)
 
     def _repr_html_(self) -> str:
         rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{self.fit_pct[n]:.2f}</td><td>{self.nrmse_pct[n]:.2f}"

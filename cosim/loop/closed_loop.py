@@ -439,8 +439,9 @@ def _closed_loop(controller: Any, fmu: FmuPlant, *, n: int, reference: Any, dist
     U[-1, ctrl_cols] = U[-2, ctrl_cols] if len(U) > 1 else U[-1, ctrl_cols]
     events = [e.to_dict() for e in getattr(controller, "events", [])] + stops
     status = "completed" if done == n else "stopped"
+    units = _units(fmu)
     fmu_traj = _trajectory(t[:done + 1], refs[:done + 1], U, Y, controller, fmu.inputs, fmu.outputs,
-                           {"source": "closed_loop", "plant": where})
+                           {"source": "closed_loop", "plant": where}, units)
 
     model_traj = None
     design = getattr(controller, "design_model", None) if isinstance(model, str) and model == "design" else model
@@ -466,7 +467,7 @@ def _closed_loop(controller: Any, fmu: FmuPlant, *, n: int, reference: Any, dist
                     Um[-1, ctrl_cols] = Um[-2, ctrl_cols]
                 notes += [f"model run: {e['message']}" for e in mstops]
                 model_traj = _trajectory(t[:mdone + 1], refs[:mdone + 1], Um, Ym, controller, fmu.inputs,
-                                         fmu.outputs, {"source": "closed_loop", "plant": "model"})
+                                         fmu.outputs, {"source": "closed_loop", "plant": "model"}, units)
     controller.reset()
     lo, hi = _limits_of(fmu, controller.inputs)
     lo = np.maximum(np.asarray(controller.u_min, dtype=float), lo)
@@ -479,8 +480,19 @@ def _closed_loop(controller: Any, fmu: FmuPlant, *, n: int, reference: Any, dist
                             outputs=tuple(controller.outputs), notes=tuple(notes), limits=(lo, hi))
 
 
+def _units(fmu: Any) -> dict[str, str]:
+    """The unit of each of the plant's variables that declares one (its own or its type's)."""
+    units = {}
+    for name, var in getattr(fmu, "variables", {}).items():
+        unit = getattr(var, "unit", None) or getattr(getattr(var, "declaredType", None), "unit", None)
+        if unit:
+            units[name] = str(unit)
+    return units
+
+
 def _trajectory(t: np.ndarray, refs: np.ndarray, U: np.ndarray, Y: np.ndarray, controller: Any,
-                inputs: Sequence[str], outputs: Sequence[str], meta: dict[str, Any]) -> Trajectory:
+                inputs: Sequence[str], outputs: Sequence[str], meta: dict[str, Any],
+                units: Mapping[str, str]) -> Trajectory:
     signals: dict[str, np.ndarray] = {f"r_{name}": refs[:, j] for j, name in enumerate(controller.tracked)}
     roles = {f"r_{name}": "reference" for name in controller.tracked}
     for j, name in enumerate(inputs):
@@ -491,7 +503,9 @@ def _trajectory(t: np.ndarray, refs: np.ndarray, U: np.ndarray, Y: np.ndarray, c
             continue  # an output the model does not have
         signals[name] = Y[:, j]
         roles[name] = "output"
-    return Trajectory.from_arrays(t, signals, roles=roles, meta=meta)
+    units = {**{f"r_{name}": units[name] for name in controller.tracked if name in units}, **units}
+    return Trajectory.from_arrays(t, signals, units={k: v for k, v in units.items() if k in signals}, roles=roles,
+                                  meta=meta)
 
 
 def _metrics(controller: Any, traj: Trajectory, model_traj: Trajectory | None, ct: np.ndarray, dt: float,

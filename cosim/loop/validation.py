@@ -375,6 +375,24 @@ class Verdict:
                 "events": {s.name: list(r.events) for s, r in zip(self.scenarios, self.results, strict=True)},
                 "notes": list(self.notes)}
 
+    def _repr_html_(self) -> str:
+        """Jupyter's view: PASSED or FAILED, and every check with its value, met ones green, the others red."""
+        from ..report import html_table
+
+        rows = [{"scenario": c["scenario"], "spec": c["spec"],
+                 "value": "n/a" if c["value"] is None or not math.isfinite(c["value"]) else float(f"{c['value']:.4g}"),
+                 "result": "n/a" if c["passed"] is None else ("met" if c["passed"] else "NOT MET")}
+                for c in self.checks]
+        marks = {(i, "result"): c["passed"] for i, c in enumerate(self.checks) if c["passed"] is not None}
+        judged = [c for c in self.checks if c["passed"] is not None]
+        solve = self.solve_time_us()
+        caption = (f"{'PASSED' if self.passed else 'FAILED'}: {sum(bool(c['passed']) for c in judged)} of "
+                   f"{len(judged)} checks met; compute time per call median {solve['median']:.3g} µs, "
+                   f"p99 {solve['p99']:.3g} µs")
+        stops = [r for r in self.reasons if "stopped early" in r]
+        return html_table(rows or [{"check": "none"}], caption=caption + "".join(f"; {r}" for r in stops),
+                          highlight=marks)
+
 
 def _as_scenarios(scenarios: Scenario | str | Iterable[Scenario | str]) -> list[Scenario]:
     items = [scenarios] if isinstance(scenarios, (Scenario, str)) else list(scenarios)

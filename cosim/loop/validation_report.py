@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from ..figures import save_figure
 from ..report import Report
 from .plots import plot_closed_loop
 from .validation import Verdict
@@ -80,7 +81,7 @@ def write_validation_report(verdict: Verdict, path: str | os.PathLike, *, contro
                              f"p99 {solve['p99']:.1f} µs, max {solve['max']:.1f} µs")
     pngs = []
     for i, (scenario, result) in enumerate(zip(verdict.scenarios, verdict.results, strict=True), start=1):
-        png = plot_closed_loop(result, folder / f"closed_loop_{i}.png", title=scenario.name)
+        png = save_figure(plot_closed_loop(result, title=scenario.name), folder / f"closed_loop_{i}.png", close=False)
         pngs.append(png)
         caption = (f"status {result.status}; " + "; ".join(f"t={e['time']:.4g} s {e['kind']}: {e['message']}"
                                                            for e in result.events[:5]))

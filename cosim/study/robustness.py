@@ -76,6 +76,20 @@ class RobustnessResult:
                 "wall_time": self.sweep.wall_time, "scheduler": self.sweep.scheduler,
                 "failed_to_run": self.sweep.n_failed}
 
+    def _repr_html_(self) -> str:
+        """Jupyter's view: the pass rate, and the nominal plant beside the worst one (with why it failed)."""
+        from ..report import html_table
+
+        worst = self.worst
+        score = "n/a" if worst["score"] is None else float(f"{worst['score']:.3g}")
+        rows = [{"plant": "nominal", **{k: float(f"{v:.4g}") for k, v in self.nominal.items()}},
+                {"plant": "worst", **{k: float(f"{v:.4g}") for k, v in worst["parameters"].items()},
+                 "passed": worst["passed"], "score": score}]
+        why = "; ".join(worst["reasons"][:3])
+        caption = (f"robustness: {self.samples} plants, pass rate {self.pass_rate:.1%}; the worst case "
+                   + (f"fails: {why}" if why else "passes") + " (score: its largest value / limit over the specs)")
+        return html_table(rows, caption=caption, highlight={(1, "passed"): bool(worst["passed"])})
+
     def save_table(self, path: str | os.PathLike) -> Path:
         """Write the per-sample table as CSV, atomically."""
         from ..files import atomic_output

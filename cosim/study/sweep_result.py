@@ -66,6 +66,17 @@ class SweepError:
         return f"{self.type}: {self.message}" if self.message else self.type
 
 
+def _short(value: Any) -> Any:
+    """A table cell's short form: lists and dicts by their size, long text cut."""
+    if isinstance(value, (list, tuple)):
+        return f"[{len(value)} values]"
+    if isinstance(value, Mapping):
+        return f"{{{len(value)} keys}}"
+    if isinstance(value, str) and len(value) > 60:
+        return value[:57] + "..."
+    return value
+
+
 def _json_ready(value: Any) -> Any:
     return json.loads(json.dumps(value, default=json_default))
 
@@ -157,6 +168,17 @@ class SweepResult:
         taken = set(case_names.values()) | {"error"}
         result_names = {key: f"result.{key}" if key in taken else key for key in result_keys}
         return case_names, result_names
+
+    def _repr_html_(self) -> str:
+        """Jupyter's view: how many cases ran, failed and how long it took, and the first ten records."""
+        from ..report import html_table
+
+        rows = [{key: _short(value) for key, value in record.items()} for record in self.to_records()[:10]]
+        marks = {(i, "error"): False for i, error in enumerate(self.errors[:10]) if error is not None}
+        more = "; the first 10 shown (to_pandas() has all)" if len(self.cases) > 10 else ""
+        caption = (f"sweep: {len(self.cases)} cases, {self.n_failed} failed, {self.wall_time:.3g} s wall time "
+                   f"({self.scheduler}){more}")
+        return html_table(rows or [{"cases": 0}], caption=caption, highlight=marks)
 
     def to_records(self) -> list[dict[str, Any]]:
         """One flat dict per case: the case's keys, the result's keys, and ``"error"``.
