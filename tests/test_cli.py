@@ -89,7 +89,7 @@ def test_real_command_exits_nonzero_without_traceback():
 @pytest.mark.parametrize("text,fragment", [
     ("time,x\n0,1\n1,nan\n", "is nan at t=1"),
     ("time,x\n0,1\n0,2\n", "increas"),
-    ("t,x\n0,1\n1,2\n", "time"),
+    ("s,x\n0,1\n1,2\n", "time"),  # a column t would be the time (default t, else time)
 ])
 def test_bad_data_files_are_one_line_errors(tmp_path, text, fragment):
     path = tmp_path / "bad.csv"

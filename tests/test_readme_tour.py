@@ -32,7 +32,8 @@ def tour_commands(text: str) -> list[list[str]]:
     block = re.search(r"## A tour\n.*?```bash\n(.*?)```", text, re.S)
     assert block, "the README has no tour block"
     joined = block.group(1).replace("\\\n", " ")
-    return [shlex.split(line, comments=True) for line in joined.splitlines() if line.strip()]
+    commands = [shlex.split(line, comments=True) for line in joined.splitlines()]
+    return [argv for argv in commands if argv]
 
 
 def written(argv: list[str]) -> list[str]:
@@ -88,8 +89,10 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster):
     assert model["meta"]["stable"] is True
     mpc = json.loads(next(out for line, out in outputs.items() if "mpc.json --scenario" in line))
     assert mpc["passed"] is True and all(c["passed"] is not False for c in mpc["checks"])
-    pid = next(out for line, out in outputs.items() if "pid.json --robustness" in line)
-    assert pid.startswith("PASSED") and "pass rate 100.0%" in pid
+    local, dask = (out for line, out in outputs.items() if "pid.json --robustness" in line)
+    assert local.startswith("PASSED") and "pass rate 100.0%" in local
+    robust = [[ln for ln in out.splitlines() if ln.startswith("robustness:")] for out in (local, dask)]
+    assert robust[0] == robust[1] and robust[0]  # the same draws and verdicts on the cluster
     diagnosis = json.loads(next(out for line, out in outputs.items() if "--report diagnosis.html" in line))
     assert diagnosis["after"]["nrmse_pct"] <= diagnosis["before"]["nrmse_pct"]
     two = next(out for line, out in outputs.items() if "run1.csv run2.csv" in line)
@@ -106,4 +109,4 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     namespace: dict = {}
     exec(compile(block.group(1), "README.md", "exec"), namespace)  # noqa: S102 - the README's own example
     assert (tmp_path / "data.parquet").is_file()
-    assert namespace["y"][2] == pytest.approx(0.01, abs=2e-3)  # the proportional loop brought theta_L near 0.01
+    assert 0.005 < namespace["y"][2] < 0.0105  # the proportional loop took theta_L more than half way to 0.01

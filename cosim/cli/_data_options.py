@@ -72,8 +72,11 @@ def read_records(paths: Sequence[str], *, states: Sequence[str], inputs: Sequenc
     rename = {f"{pos}_dot": vel for vel, pos in derive.items()} if differentiate else {}
     records = []
     for path in paths:
+        # roles now, so that the record's checks know its inputs (a constant input is refused)
         data = load_data(path, time=time, columns=columns, derive=list(dict.fromkeys(derive.values()))
-                         if differentiate else (), derive_window=derive_window, resample=resample)
+                         if differentiate else (), derive_window=derive_window, resample=resample,
+                         roles={**dict.fromkeys((n for n in state_names if n not in derive), "state"),
+                                **dict.fromkeys(input_names, "input")})
         if any(old != new for old, new in rename.items()):
             data = Trajectory.from_arrays(data.time, {rename.get(n, n): data[n] for n in data.names},
                                           units={rename.get(n, n): data.units[i] for i, n in enumerate(data.names)},
