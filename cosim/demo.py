@@ -106,7 +106,9 @@ def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: flo
     Returns
     -------
     dict
-        ``equations``, ``model``, ``fit_r2``, ``fit_nrmse_pct``, ``model_plot``, ``fmu``, ``data``, ``plot``,
+        ``equations``, ``model``, ``fit`` (``fit_pct``, ``nrmse_pct``, ``r2`` per state, as ``cosim compare``
+        names them; ``fit_r2`` and ``fit_nrmse_pct``, the fit, are the same figures under their old names),
+        ``model_plot``, ``fmu``, ``data``, ``plot``,
         ``samples``, ``dt``; ``diagnosis`` (``effects``, ``before``, ``after``, ``message``, ``model``,
         ``equations_after``, ``window_s``, ``seconds``); ``controllers`` (PID and MPC designed on the linear model:
         ``passed``, ``settling_time``, ``overshoot_pct``, ``steady_state_error``, ``iae``, ``disturbance``...),
@@ -161,6 +163,9 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
                     others=[("no friction, no noise", clean, COLOURS["other"])],
                     title="Bundled two-mass servo FMU: multisine 1-40 Hz, 20 % of max torque, from rest")
     _advance(bar, "identify")
+    # the reference study's settings (no constant, the kinematic rows given): with `cosim identify`'s defaults the
+    # diagnosis names the same friction (Fc 101.0 +- 0.7 N m) and all four controllers pass, but its residual
+    # after is not white and the MPC's model discrepancy falls by 0.50x, not below it (2026-11-27)
     estimator = SINDYc(**STUDY_SETTINGS).fit(measured, states=list(STATES), inputs=["Tm"])
     model = estimator.model_
     model.save(out / "model.json")
@@ -175,6 +180,9 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     fit = {"fit_r2": dict(zip(STATES, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
            "fit_nrmse_pct": dict(zip(STATES, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
                                      strict=True))}
+    # the names cosim identify, compare and diagnose use (fit_r2 and fit_nrmse_pct, a fit, are kept for old scripts)
+    fit["fit"] = {"fit_pct": fit["fit_nrmse_pct"], "r2": fit["fit_r2"],
+                  "nrmse_pct": {k: round(100.0 - v, 3) for k, v in fit["fit_nrmse_pct"].items()}}
     report = Report("cosim demo", subtitle=f"Bundled two-mass servo FMU with an undeclared Coulomb friction "
                     f"Fc={friction:g} N m and {noise:.0%} measurement noise: linear SINDYc model, diagnosis of what it "
                     "lacks, the model with the effect, PID and MPC designed on each model, validated on the FMU")
@@ -258,7 +266,7 @@ def _data_sections(part: Report, plot: Path, fit_plot: Path, model: Any, fit: di
     part.add_figure("Data from the FMU", plot, caption="Multisine torque from rest, with friction and noise (the "
                     "data, dark) and without either (purple); the torque is the same in both runs.")
     part.add_text("Identified linear model (SINDYc)", "\n\n".join(model.equations()))
-    part.add_table(None, [{"state": k, "R2": fit["fit_r2"][k], "NRMSE fit %": fit["fit_nrmse_pct"][k]}
+    part.add_table(None, [{"state": k, "R2": fit["fit_r2"][k], "fit % (NRMSE fit)": fit["fit_nrmse_pct"][k]}
                           for k in fit["fit_r2"]], caption="free run of the model against the noise-free data")
     part.add_figure(None, fit_plot, caption="The linear model lacks the friction; under each state, the data minus "
                     "the model's free run.")
