@@ -156,27 +156,6 @@ def test_bad_input_is_refused():
 
 
 @pytest.mark.slow
-def test_cli_diagnose_json_and_report(tmp_path):
-    import json
-
-    from click.testing import CliRunner
-
-    from cosim.cli import main
-
-    clean = simulate(build_fmu(), {"Tm": "multisine:amp=0.2,fmin=1,fmax=40"}, duration=DURATION, dt=STUDY_DT,
-                     parameters={"Fc": 100.0})
-    clean.with_noise(0.05, seed=0).write(tmp_path / "data.csv")
-    result = CliRunner().invoke(main, ["diagnose", str(tmp_path / "data.csv"), "--state", ",".join(STATES),
-                                       "--input", "Tm", "--kinematics", "theta_m=omega_m,theta_L=omega_L",
-                                       "--report", str(tmp_path / "d.html"), "--json"])
-    assert result.exit_code == 0, result.stderr
-    data = json.loads(result.stdout)
-    assert data["effects"][0]["name"] == "coulomb_friction" and data["effects"][0]["attached_to"] == "omega_m"
-    assert data["effects"][0]["parameters"]["Fc"] == pytest.approx(100.0, rel=0.05)
-    assert data["after"]["nrmse_pct"] < data["before"]["nrmse_pct"]
-    assert (tmp_path / "d.html").stat().st_size > 50_000
-
-
 def test_cli_diagnose_bad_input_is_one_line(tmp_path):
     from click.testing import CliRunner
 

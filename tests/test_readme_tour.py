@@ -91,12 +91,15 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster):
     assert mpc["passed"] is True and all(c["passed"] is not False for c in mpc["checks"])
     local, dask = (out for line, out in outputs.items() if "pid.json --robustness" in line)
     assert local.startswith("PASSED") and "pass rate 100.0%" in local
+    # the same draws and verdicts on the cluster as in local processes (the Monte Carlo's pass rate, worst case)
     robust = [[ln for ln in out.splitlines() if ln.startswith("robustness:")] for out in (local, dask)]
-    assert robust[0] == robust[1] and robust[0]  # the same draws and verdicts on the cluster
+    assert robust[0] == robust[1] and robust[0]
+    assert f"run on {cluster}" in dask and "run on tcp://" not in local
     diagnosis = json.loads(next(out for line, out in outputs.items() if "--report diagnosis.html" in line))
     assert diagnosis["after"]["nrmse_pct"] <= diagnosis["before"]["nrmse_pct"]
     two = next(out for line, out in outputs.items() if "run1.csv run2.csv" in line)
-    assert two.startswith("found coulomb_friction on omega_m")
+    assert two.startswith("found coulomb_friction on omega_m")  # the records' Fc = 100 N m, within 5 %
+    assert float(re.search(r"Fc=([\d.]+)", two).group(1)) == pytest.approx(100.0, rel=0.05)
     fit = next(out for line, out in outputs.items() if line.startswith("cosim compare"))
     assert all(float(v) > 85.0 for v in re.findall(r"fit (-?[\d.]+) %", fit))
 

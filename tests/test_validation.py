@@ -179,20 +179,6 @@ def test_robustness_finds_the_plants_where_specs_fail(fmu):
     np.testing.assert_array_equal(again.table["KL"], rob.table["KL"])  # same seed, same plants
 
 
-@pytest.mark.slow
-def test_robustness_on_a_dask_cluster_matches_local_processes(fmu):
-    from distributed import Client, LocalCluster
-
-    specs = ["settling_time<=0.9", "overshoot<=10%"]
-    kwargs = {"samples": 4, "spread": 0.2, "effects": {"Fc": (0.0, 150.0)}, "seed": 1, "progress": False}
-    local = robustness(fmu, StateFeedback(), "step:amp=0.01,duration=1.2", specs, workers=2, **kwargs)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
-            Client(cluster) as client:
-        remote = robustness(fmu, StateFeedback(), "step:amp=0.01,duration=1.2", specs, scheduler=client, **kwargs)
-    assert remote.sweep.scheduler.startswith("tcp://")
-    np.testing.assert_allclose(remote.table["settling_time"], local.table["settling_time"], rtol=1e-9)
-    assert remote.pass_rate == local.pass_rate
-    assert (local.table["Fc"] >= 0).all() and (local.table["Fc"] <= 150).all()
 
 
 def test_ramp_then_hold_is_followed_and_judged_after_the_ramp_ends(fmu):

@@ -113,6 +113,7 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
     if rob is not None:
         lines.append(f"robustness: {rob.samples} samples, pass rate {rob.pass_rate:.1%}, worst case "
                      + ", ".join(f"{k}={v:.4g}" for k, v in rob.worst["parameters"].items()))
+        lines.append(f"  run on {rob.sweep.scheduler}")
     lines += [f"{k}: {v}" for k, v in files.items()]
     _emit(as_json, payload, "\n".join(lines))
     if not verdict.passed or (rob is not None and rob.pass_rate < min_pass_rate):
