@@ -60,7 +60,10 @@ def test_the_emps_lines_are_the_commands_the_emps_tests_run():
 def cluster():
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as local:
+    # workers as threads of this process, which has cosim imported already: a process per worker would import it
+    # again (CI time); the command still reaches the cluster through its TCP address, as on a real one
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None,
+                      protocol="tcp") as local:
         yield local.scheduler_address
 
 
