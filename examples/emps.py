@@ -400,5 +400,5 @@ def main(argv: Sequence[str] | None = None) -> dict[str, Any]:
 if __name__ == "__main__":
     try:
         main()
-    except CosimError as exc:
+    except (CosimError, AssertionError) as exc:  # bad input, or a target missed: one line, exit status 1
         sys.exit(f"emps: {exc}")

@@ -448,8 +448,9 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     if jac is None:
         jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
     ties = _tie_map(screen, current, nuis, jac.shape[1])
-    reduced = jac @ ties
-    cov = ties @ np.linalg.pinv(reduced.T @ reduced) @ ties.T * screen.variance
+    with np.errstate(over="ignore", invalid="ignore"):  # sensitivities near overflow: standard errors inf or nan
+        reduced = jac @ ties
+        cov = ties @ np.linalg.pinv(reduced.T @ reduced) @ ties.T * screen.variance
     first = screen.base.shape[1]
     nuis = [replace(nu, std_error=nu.value * math.sqrt(max(cov[first + j, first + j], 0.0)))
             for j, nu in enumerate(nuis)]
