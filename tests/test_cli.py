@@ -41,6 +41,12 @@ def test_fmu_info_lists_variables():
     assert [v["name"] for v in info["inputs"]] == ["Tm", "TL"]
     assert {"Jm", "JL", "KL", "Bm", "BL", "Fc", "delay"} <= {p["name"] for p in info["parameters"]}
     assert info["states"] == ["theta_m", "omega_m", "theta_L", "omega_L"]
+    # numbers as numbers, of the variable's type (issue 15): reals as floats, integers as ints
+    tm = info["inputs"][0]
+    assert (tm["start"], tm["min"], tm["max"]) == (0.0, -5000.0, 5000.0) and isinstance(tm["max"], float)
+    params = {p["name"]: p for p in info["parameters"]}
+    assert params["KL"]["start"] == 2.5e6 and params["nsub"]["start"] == 10 and isinstance(params["nsub"]["start"], int)
+    assert isinstance(info["default_step"], float)
 
 
 def test_simulate_the_issue_example(tmp_path):
@@ -152,3 +158,24 @@ def test_a_library_warning_prints_as_one_warning_line(tmp_path):
     assert result.stderr.splitlines() == [
         "warning: run.meta.json describes columns ['time', 'a'], not those of run.csv; its units, roles and meta "
         "are ignored (rewrite or delete it)"]
+
+
+def test_identify_a_model_with_no_inputs_and_the_polynomial_library(tmp_path):
+    """Issue 15: a plant without inputs (Van der Pol, simulated by scipy) through `cosim identify`, cubic library."""
+    from scipy.integrate import solve_ivp
+
+    from cosim.data.trajectory import Trajectory
+    from cosim.identify.model import IdentifiedModel
+
+    t = np.arange(3001) * 0.01
+    sol = solve_ivp(lambda _, z: [z[1], (1 - z[0] ** 2) * z[1] - z[0]], (0, 30), [2.0, 0.0], t_eval=t,
+                    rtol=1e-10, atol=1e-12)
+    Trajectory.from_arrays(t, {"x": sol.y[0], "y": sol.y[1]}).write(tmp_path / "vdp.csv")
+    result = run("identify", str(tmp_path / "vdp.csv"), "--state", "x,y", "--library", "polynomial", "--degree", "3",
+                 "-o", str(tmp_path / "m.json"), "--json")
+    assert result.exit_code == 0, result.stderr
+    assert min(json.loads(result.stdout)["fit"]["fit_pct"].values()) > 99.0
+    model = IdentifiedModel.load(tmp_path / "m.json")
+    row = dict(zip(model.terms, model.coef[model.states.index("y")], strict=True))
+    assert model.inputs == ()
+    assert (row["x"], row["y"], row["x**2*y"]) == pytest.approx((-1.0, 1.0, -1.0), rel=0.01)

@@ -72,6 +72,18 @@ def test_step_of_a_closed_plant_is_refused_not_crashing(fmu):
         plant.step([0.0, 0.0])
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_step_refuses_a_nonfinite_input_naming_it_and_the_time(fmu, bad):
+    with FmuPlant(fmu, dt=DT) as plant:
+        plant.step([1.0, 0.0])
+        with pytest.raises(InvalidSettingError, match=rf"^step\(\) input TL is {bad} at t={DT:.9g} s; inputs must "
+                                                      r"be finite numbers"):
+            plant.step([0.0, bad])
+        assert plant.time == pytest.approx(DT)  # nothing was passed on to the FMU
+        with pytest.raises(FmiCallError, match="diverged"):  # finite, though their sum overflows: passed on
+            plant.step([1e300, 1e300])
+
+
 def test_simulate_returns_inputs_states_units_and_meta(fmu):
     traj = simulate(fmu, {"Tm": "square:amp=0.1,freq=2"}, duration=1.0, dt=1e-3, parameters={"Fc": 10.0})
     assert len(traj) == 1001

@@ -54,11 +54,11 @@ def fmu_info(path: str, as_json: bool) -> None:
     md = open_model_description(fmu_path)
 
     def describe(v: Any) -> dict[str, Any]:
-        d = {"name": v.name, "type": v.type, "unit": v.unit or "", "start": v.start,
+        d = {"name": v.name, "type": v.type, "unit": v.unit or "", "start": _typed(v.type, v.start),
              "description": v.description or ""}
         for key in ("min", "max"):
             if getattr(v, key, None) not in (None, ""):
-                d[key] = getattr(v, key)
+                d[key] = _typed(v.type, getattr(v, key))
         return d
 
     groups = {c: [describe(v) for v in md.modelVariables if v.causality == c]
@@ -69,7 +69,8 @@ def fmu_info(path: str, as_json: bool) -> None:
         "model_identifier": md.coSimulation.modelIdentifier, "generation_tool": md.generationTool,
         "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
         "states": states,
-        "default_step": getattr(md.defaultExperiment, "stepSize", None) if md.defaultExperiment else None,
+        "default_step": _typed("Float64", getattr(md.defaultExperiment, "stepSize", None))
+        if md.defaultExperiment else None,
     }
     lines = [f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, {md.generationTool or 'unknown tool'})",
              f"  file: {fmu_path}"]
@@ -77,6 +78,34 @@ def fmu_info(path: str, as_json: bool) -> None:
         lines.append(f"  {title}:")
         for d in info[key]:
             rng = f"  [{d.get('min', '')}, {d.get('max', '')}]" if "min" in d or "max" in d else ""
-            lines.append(f"    {d['name']:<12} {d['start'] or '':>10} {d['unit']:<12}{rng}  {d['description']}")
+            start = "" if d["start"] is None else d["start"]
+            lines.append(f"    {d['name']:<12} {start!s:>10} {d['unit']:<12}{rng}  {d['description']}")
     lines.append(f"  states: {', '.join(states) or 'not declared'}")
     _emit(as_json, info, "\n".join(lines))
+
+
+_INTEGER_TYPES = ("Integer", "Enumeration", "Int8", "Int16", "Int32", "Int64", "UInt8", "UInt16", "UInt32", "UInt64")
+
+
+def _typed(kind: str, text: Any) -> Any:
+    """A model description's attribute as its variable type's JSON value: numbers as numbers, Booleans as
+    true/false, an FMI 3 array's space-separated start as a list; strings (and anything unreadable) as given.
+
+    Examples
+    --------
+    >>> _typed("Real", "0.5"), _typed("Int32", "-3"), _typed("Boolean", "true"), _typed("Float64", "1 2")
+    (0.5, -3, True, [1.0, 2.0])
+    """
+    if text is None or not isinstance(text, str) or kind in ("String", "Binary", "Clock"):
+        return text
+    parts = text.split()
+    try:
+        if kind == "Boolean":
+            values = [{"true": True, "false": False, "1": True, "0": False}[p.lower()] for p in parts]
+        elif kind in _INTEGER_TYPES:
+            values = [int(p) for p in parts]
+        else:
+            values = [float(p) for p in parts]
+    except (KeyError, ValueError):
+        return text
+    return values[0] if len(values) == 1 else values

@@ -276,6 +276,7 @@ class FmuPlant:
         comp = ctypes.c_void_p(self._fmu.component)
         t_c, h_c = ctypes.c_double(self.t0), ctypes.c_double(self.dt)
         t0, dt, counter, fail, bad_input = self.t0, self.dt, self._counter, self._raise_call_error, self._bad_input
+        nonfinite = self._nonfinite_input
         v2 = self.fmi_version == "2.0"
         names = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep",
                                                                          "fmi3GetFloat64")
@@ -301,6 +302,9 @@ class FmuPlant:
                 bad_input(u)
             k = counter[0]
             t = t0 + k * dt
+            total = sum(u_buf)
+            if total - total != 0.0:  # a NaN or an infinity (or a sum that overflowed: looked at one by one)
+                nonfinite(t)
             t_c.value = t
             status = set_real(*set_args)
             if status > 1:
@@ -444,6 +448,13 @@ class FmuPlant:
             raise InvalidSettingError(f"step() got {n} input values, expected {self._n_in} "
                                       f"({', '.join(self.inputs)}), in that order")
         raise InvalidSettingError(f"step() inputs must be numbers, got {u!r}")
+
+    def _nonfinite_input(self, t: float) -> None:
+        """Refuse a NaN or infinite input of the step at `t`, naming it (a finite one passes)."""
+        for name, value in zip(self.inputs, self._u_buf, strict=True):
+            if not math.isfinite(value):
+                raise InvalidSettingError(f"step() input {name} is {value} at t={t:.9g} s; inputs must be finite "
+                                          "numbers (check the controller or the signal feeding it)")
 
     def run(self, u: np.ndarray) -> np.ndarray:
         """Step through the rows of `u` (n_steps x n_inputs) and return the outputs after each step.
