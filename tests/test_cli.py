@@ -179,3 +179,15 @@ def test_identify_a_model_with_no_inputs_and_the_polynomial_library(tmp_path):
     row = dict(zip(model.terms, model.coef[model.states.index("y")], strict=True))
     assert model.inputs == ()
     assert (row["x"], row["y"], row["x**2*y"]) == pytest.approx((-1.0, 1.0, -1.0), rel=0.01)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["compare", "model.json", "data.csv", "--horizon", "0"],
+     "error: Invalid value for '--horizon': 0 is not in the range x>=1. (see `cosim compare --help`)"),
+    (["simulate", "bundled", "--bogus"], "error: No such option '--bogus'. (see `cosim simulate --help`)"),
+    (["compare", "model.json"], "error: Missing argument 'DATA'. (see `cosim compare --help`)"),
+    (["nosuchcommand"], "error: No such command 'nosuchcommand'. (see `cosim --help`)"),
+])
+def test_usage_errors_are_one_line_exit_2(args, message):
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stderr.splitlines() == [message] and proc.stdout == ""

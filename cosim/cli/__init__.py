@@ -20,6 +20,9 @@ One module per command group, each importing the rooms it drives only when its c
 
 from __future__ import annotations
 
+import sys
+from typing import Any
+
 import click
 
 from . import compare, demo, design, diagnose, export, fmu, identify, reproduce, simulate, validate
@@ -27,7 +30,37 @@ from . import compare, demo, design, diagnose, export, fmu, identify, reproduce,
 __all__ = ["main"]
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())  # click >= 8.2
+
+
+class _OneLineUsageErrors(click.Group):
+    """click's usage errors (an unknown option, a value out of range, a missing argument) as one line,
+    ``error: ... (see `cosim CMD --help`)``, exit status 2, like every other bad input; click prints four."""
+
+    def main(self, args: Any = None, prog_name: str | None = None, complete_var: str | None = None,
+             standalone_mode: bool = True, **extra: Any) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            result = super().main(args, prog_name, complete_var, False, **extra)
+        except click.UsageError as exc:
+            if isinstance(exc, _NO_ARGS_IS_HELP):  # a group called bare: its help, as click shows it
+                exc.show()
+                sys.exit(exc.exit_code)
+            where = f" (see `{exc.ctx.command_path} --help`)" if exc.ctx is not None else ""
+            click.echo(f"error: {' '.join(exc.format_message().split())}{where}", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            click.echo(f"error: {' '.join(exc.format_message().split())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            click.echo("error: interrupted", err=True)
+            sys.exit(130)
+        sys.exit(result if isinstance(result, int) else 0)
+
+
+@click.group(cls=_OneLineUsageErrors,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 110})
 @click.version_option(package_name="cosim")
 def main() -> None:
     """cosim: identify, diagnose and control machines with FMU plants.

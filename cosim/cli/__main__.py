@@ -1,5 +1,5 @@
-"""``python -m cosim.cli ...`` runs the ``cosim`` command."""
+"""``python -m cosim.cli ...`` runs the ``cosim`` command (and names itself so in its messages)."""
 
 from . import main
 
-main()
+main(prog_name="cosim")
