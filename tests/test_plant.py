@@ -135,14 +135,18 @@ def rewrite_fmu(src: Path, dst: Path, *, drop_prefix: str | None = None, edit=No
     return dst
 
 
-def test_fmu_without_cosimulation(fmu, tmp_path):
+@pytest.mark.parametrize(("version", "interface"), [("2.0", "ModelExchange"), ("3.0", "ModelExchange"),
+                                                  ("3.0", "ScheduledExecution")])
+def test_fmu_without_cosimulation_says_which_interface_it_has(tmp_path, version, interface):
     import re
 
-    def to_model_exchange(xml: str) -> str:
-        return re.sub(r"<CoSimulation\b", "<ModelExchange", xml).replace("</CoSimulation>", "</ModelExchange>")
+    def to_other(xml: str) -> str:
+        return re.sub(r"<CoSimulation\b", f"<{interface}", xml).replace("</CoSimulation>", f"</{interface}>")
 
-    path = rewrite_fmu(fmu, tmp_path / "me.fmu", edit=to_model_exchange)
-    with pytest.raises(FmuFormatError, match="co-simulation"):
+    path = rewrite_fmu(build_fmu(fmi_version=version), tmp_path / "other.fmu", edit=to_other)
+    kind = re.sub(r"(?<=[a-z])(?=[A-Z])", " ", interface)  # "Model Exchange", "Scheduled Execution"
+    with pytest.raises(FmuFormatError, match=f"has no co-simulation interface \\(only {kind}\\); cosim steps "
+                                             "co-simulation FMUs"):
         FmuPlant(path, dt=DT)
 
 

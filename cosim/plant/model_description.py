@@ -67,8 +67,12 @@ def open_model_description(fmu: str | os.PathLike) -> ModelDescription:
         raise FmuFormatError(f"{path} is an FMI {md.fmiVersion} FMU; cosim drives FMI 2.0 and 3.0 FMUs: "
                              "re-export it as FMI 2.0 or 3.0")
     if md.coSimulation is None:
-        raise FmuFormatError(f"{path} has no co-simulation interface (Model Exchange only); re-export it with "
-                             "co-simulation enabled")
+        has = [kind for kind, interface in (("Model Exchange", md.modelExchange),
+                                            ("Scheduled Execution", getattr(md, "scheduledExecution", None)))
+               if interface is not None]
+        what = f"only {' and '.join(has)}" if has else "no interface at all"
+        raise FmuFormatError(f"{path} has no co-simulation interface ({what}); cosim steps co-simulation FMUs: "
+                             "re-export it with co-simulation enabled")
     platform = fmpy.platform if md.fmiVersion == "2.0" else fmpy.platform_tuple
     library = f"binaries/{platform}/{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if library not in names:
