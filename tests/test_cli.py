@@ -191,3 +191,17 @@ def test_identify_a_model_with_no_inputs_and_the_polynomial_library(tmp_path):
 def test_usage_errors_are_one_line_exit_2(args, message):
     proc = subprocess.run([sys.executable, "-m", "cosim.cli", *args], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.splitlines() == [message] and proc.stdout == ""
+
+
+def test_simulate_records_named_variables_and_fmu_info_lists_locals(tmp_path):
+    out = tmp_path / "r.csv"
+    result = run("simulate", "bundled", "--input", "Tm=1000", "--duration", "0.01", "--dt", "1e-3",
+                 "--record", "theta_m,der_omega_m", "-o", str(out))
+    assert result.exit_code == 0, result.stderr
+    assert out.read_text().splitlines()[0] == "time,Tm,TL,theta_m,der_omega_m"
+    assert run("simulate", "bundled", "--duration", "0.01", "--dt", "1e-3", "--record", "all", "-o",
+               str(tmp_path / "a.csv")).exit_code == 0
+    assert "der_omega_L" in (tmp_path / "a.csv").read_text().splitlines()[0]
+    info = json.loads(run("fmu", "info", "bundled", "--all", "--json").stdout)
+    assert [v["name"] for v in info["locals"]] == ["der_theta_m", "der_omega_m", "der_theta_L", "der_omega_L"]
+    assert "locals" not in json.loads(run("fmu", "info", "bundled", "--json").stdout)

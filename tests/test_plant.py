@@ -338,3 +338,16 @@ def test_each_plant_gets_its_own_fmu_messages(fmu):
                 good.step([0.0, 0.0])
                 bad.step([0.0, 0.0])
         assert not any("diverged" in m for m in good._messages)
+
+
+def test_any_float_variable_can_be_recorded_not_only_outputs(fmu):
+    """Issue 15: a state or local variable the FMU does not declare as an output (here the derivatives)."""
+    traj = simulate(fmu, {"Tm": 1000.0}, duration=0.01, dt=1e-3, outputs=["omega_m", "der_theta_m", "der_omega_m"])
+    assert traj.names == ("Tm", "TL", "omega_m", "der_theta_m", "der_omega_m")
+    np.testing.assert_array_equal(traj["der_theta_m"], traj["omega_m"])  # theta_m' = omega_m, at every sample
+    assert np.all(traj["der_omega_m"][1:] > 0)  # a positive torque from rest accelerates the motor
+    every = simulate(fmu, {"Tm": 1000.0}, duration=0.01, dt=1e-3, outputs="all")
+    assert {"theta_L", "der_omega_L", "KL"} <= set(every.names) and "time" not in every.names
+    assert simulate(fmu, duration=0.01, dt=1e-3).names == ("Tm", "TL", "theta_m", "omega_m", "theta_L", "omega_L")
+    with pytest.raises(UnknownVariableError, match="has no real variable named 'der_omega_x'"):
+        FmuPlant(fmu, dt=1e-3, outputs=["der_omega_x"])

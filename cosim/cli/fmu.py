@@ -37,9 +37,11 @@ def fmu_build(fmi_version: str, force: bool, as_json: bool) -> None:
 
 @fmu.command("info")
 @click.argument("path")
+@click.option("--all", "show_all", is_flag=True,
+              help="Also list the local variables (what `cosim simulate --record` can record beside the outputs).")
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 @_friendly
-def fmu_info(path: str, as_json: bool) -> None:
+def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
     """Describe an FMU: inputs, outputs, states, parameters with units and start values.
 
     PATH is an .fmu file, or `bundled` for the bundled servo.
@@ -47,6 +49,7 @@ def fmu_info(path: str, as_json: bool) -> None:
     \b
     Example:
       cosim fmu info bundled
+      cosim fmu info bundled --all --json
     """
     from ..plant.model_description import open_model_description
 
@@ -62,19 +65,20 @@ def fmu_info(path: str, as_json: bool) -> None:
         return d
 
     groups = {c: [describe(v) for v in md.modelVariables if v.causality == c]
-              for c in ("input", "output", "parameter")}
+              for c in ("input", "output", "parameter", "local")}
     states = [v.derivative.name for v in md.modelVariables if getattr(v, "derivative", None) is not None]
     info = {
         "path": str(fmu_path), "model": md.modelName, "fmi_version": md.fmiVersion,
         "model_identifier": md.coSimulation.modelIdentifier, "generation_tool": md.generationTool,
         "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
-        "states": states,
+        "states": states, **({"locals": groups["local"]} if show_all else {}),
         "default_step": _typed("Float64", getattr(md.defaultExperiment, "stepSize", None))
         if md.defaultExperiment else None,
     }
     lines = [f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, {md.generationTool or 'unknown tool'})",
              f"  file: {fmu_path}"]
-    for title, key in (("inputs", "inputs"), ("outputs", "outputs"), ("parameters", "parameters")):
+    for title, key in (("inputs", "inputs"), ("outputs", "outputs"), ("parameters", "parameters"),
+                       *((("locals", "locals"),) if show_all else ())):
         lines.append(f"  {title}:")
         for d in info[key]:
             rng = f"  [{d.get('min', '')}, {d.get('max', '')}]" if "min" in d or "max" in d else ""

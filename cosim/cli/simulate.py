@@ -36,12 +36,15 @@ __all__ = ["data", "simulate"]
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise.")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), help="Write the trajectory (.csv or "
               ".parquet).")
+@click.option("--record", default=None, metavar="NAME,...|all",
+              help="Variables to record (default: the FMU's outputs): outputs, states and local variables by name "
+                   "(e.g. mass.s), or all (every Float variable).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: long runs on a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
 def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: str, time_column: str | None,
              duration: str | None, dt: str | None, sets: tuple[str, ...], starts: tuple[str, ...], noise: str,
-             seed: int, out: str | None, progress: bool | None, as_json: bool) -> None:
+             seed: int, out: str | None, record: str | None, progress: bool | None, as_json: bool) -> None:
     """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
 
     PATH is an .fmu file, or `bundled` for the bundled servo.
@@ -68,7 +71,8 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     if dt is None or duration is None:
         raise InvalidSettingError("give --dt and --duration (or --input-file, whose step and length they take)")
     traj = run(fmu_path, signals, duration=parse_number(duration, what="--duration"),
-               dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress, t0=t0)
+               dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress, t0=t0,
+               outputs=None if record is None else "all" if record.strip() == "all" else _names(record, "--record"))
     if level:
         traj = traj.with_noise(level, seed=seed)
     if out:

@@ -142,7 +142,7 @@ def simulate(
     parameters: Mapping[str, float] | None = None,
     start: Mapping[str, float] | None = None,
     t0: float = 0.0,
-    outputs: list[str] | None = None,
+    outputs: list[str] | str | None = None,
     progress: bool | None = None,
 ) -> Trajectory:
     """Simulate a co-simulation FMU at a fixed step and return its trajectory.
@@ -159,8 +159,10 @@ def simulate(
         Parameter values and start values by name (see :class:`FmuPlant`).
     t0 : float
         Start time.
-    outputs : list of str, optional
-        Outputs to record (default: all).
+    outputs : list of str or "all", optional
+        Variables to record (default: the FMU's outputs). Any scalar Float variable may be named: an output, a
+        state or local variable the FMU does not declare as an output (``"mass.s"``), a parameter; ``"all"``
+        records every one of them.
     progress : bool or None, default None
         Progress bar on stderr. None shows it for long runs (200,000 steps or more) and only when stderr is
         a terminal; True shows it anyway, False hides it.
@@ -181,7 +183,8 @@ def simulate(
     n = steps_for(duration, dt)
     inputs = dict(inputs or {})
     # the time, inputs and outputs, and a copy of them in the Trajectory: refused before the FMU loads
-    check_memory(2.0 * (n + 1) * (1 + len(inputs) + len(outputs or ()) + 1), what=f"a simulation of {n + 1:,} "
+    named = len(outputs) if isinstance(outputs, (list, tuple)) else 0
+    check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
     with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs) as plant:
         unknown = [name for name in inputs if name not in plant.inputs]

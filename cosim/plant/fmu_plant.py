@@ -110,8 +110,13 @@ class FmuPlant:
         self._vars = {v.name: v for v in md.modelVariables}
         real_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type in REAL_TYPES]
         real_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type in REAL_TYPES]
+        # anything else a user may record: a state or local (Modelica tools often expose a plant's position only
+        # as `mass.s`), a calculated parameter... every scalar Float variable but time and the inputs
+        recordable = [v.name for v in md.modelVariables if v.type in REAL_TYPES and v.causality != "independent"
+                      and not getattr(v, "dimensions", None) and v.name not in real_in]
         self.inputs = tuple(self._choose(inputs, real_in, "input"))
-        self.outputs = tuple(self._choose(outputs, real_out, "output"))
+        self.outputs = tuple(recordable if outputs == "all" else real_out if outputs is None
+                             else self._choose(outputs, recordable, "variable"))
         self._param_names = tuple(v.name for v in md.modelVariables
                                   if v.causality == "parameter" and v.variability in ("fixed", "tunable"))
         derivative_of = {}
