@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
+from diagnose_fixtures import coulomb_mass
 
 from cosim import build_fmu, simulate
 from cosim.data.trajectory import Trajectory
@@ -116,19 +117,7 @@ def test_no_effect_no_claim(seed):
 
 
 def test_report_files(tmp_path):
-    # noise-free mass with Coulomb friction: quick, and the evidence plot must show the step at zero speed
-    dt, n = 1e-3, 3000
-    t = np.arange(n + 1) * dt
-    u = 3.0 * np.sin(2 * np.pi * 1.3 * t) + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t))
-    x, v = np.zeros(n + 1), np.zeros(n + 1)
-    for k in range(n):
-        xs, vs = x[k], v[k]
-        for _ in range(10):
-            xs, vs = xs + 1e-4 * vs, vs + 1e-4 * (u[k] - 2.0 * vs - 1.0 * np.tanh(vs / 1e-3))
-        x[k + 1], v[k + 1] = xs, vs
-    data = Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, roles={"x": "state", "v": "state", "u": "input"})
-    linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u"),
-                             coef=np.array([[1.0, 0.0], [-2.0, 1.0]]))
+    data, linear = coulomb_mass()  # quick, and the evidence plot must show the step at zero speed
     report = diagnose(linear, data)
     assert [e.name for e in report.effects] == ["coulomb_friction"]
     assert report.effects[0].parameters["Fc"] == pytest.approx(1.0, rel=0.01)

@@ -4,6 +4,7 @@ panels under comparisons; and the results with a report show as a small HTML tab
 
 import numpy as np
 import pytest
+from diagnose_fixtures import coulomb_mass
 from loop_fixtures import StateFeedback
 from matplotlib.colors import same_color
 from matplotlib.figure import Figure
@@ -38,20 +39,8 @@ def loop(fmu):
 
 @pytest.fixture(scope="module")
 def friction_diagnosis():
-    """A noise-free mass with Coulomb friction, and its diagnosis (tests/test_diagnosis.py's record)."""
-    dt, n = 1e-3, 3000
-    t = np.arange(n + 1) * dt
-    u = 3.0 * np.sin(2 * np.pi * 1.3 * t) + 1.5 * np.sign(np.sin(2 * np.pi * 0.7 * t))
-    x, v = np.zeros(n + 1), np.zeros(n + 1)
-    for k in range(n):
-        xs, vs = x[k], v[k]
-        for _ in range(10):
-            xs, vs = xs + 1e-4 * vs, vs + 1e-4 * (u[k] - 2.0 * vs - 1.0 * np.tanh(vs / 1e-3))
-        x[k + 1], v[k + 1] = xs, vs
-    data = Trajectory.from_arrays(t, {"x": x, "v": v, "u": u}, units={"x": "m", "v": "m/s", "u": "N"},
-                                  roles={"x": "state", "v": "state", "u": "input"})
-    linear = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "u"),
-                             coef=np.array([[1.0, 0.0], [-2.0, 1.0]]))
+    """A noise-free mass with Coulomb friction, and its diagnosis (diagnose_fixtures.coulomb_mass)."""
+    data, linear = coulomb_mass()
     return diagnose(linear, data)
 
 
