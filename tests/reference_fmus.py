@@ -10,6 +10,7 @@ the system's, else the ``cmake`` PyPI package's (a test dependency).
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import shutil
@@ -52,21 +53,29 @@ def reference_fmus(fmi_version: int) -> dict[str, Path]:
         pytest.fail(f"the Reference FMUs' source is not at {SOURCE} (see ../shared/fmus/README.md)")
     cache = Path(os.environ.get("COSIM_CACHE_DIR") or Path.home() / ".cache" / "cosim") / "reference-fmus"
     target = cache / f"fmi{fmi_version}-{_source_hash()}"
-    if not all((target / f"{name}.fmu").is_file() for name in NAMES[fmi_version]):
-        cache.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=cache) as tmp:
-            build = Path(tmp) / "build"
-            cmake = _cmake()
-            for command in ([cmake, "-S", str(SOURCE), "-B", str(build), f"-DFMI_VERSION={fmi_version}",
-                             "-DCMAKE_BUILD_TYPE=Release", "-DCMAKE_C_FLAGS=-Wno-error=stringop-truncation"],
-                            [cmake, "--build", str(build), "-j2"]):
-                done = subprocess.run(command, capture_output=True, text=True, timeout=600)
-                if done.returncode:
-                    pytest.fail(f"building the Reference FMUs failed: {' '.join(command)}\n{done.stderr[-3000:]}")
-            staged = Path(tmp) / "fmus"
-            staged.mkdir()
-            for name in NAMES[fmi_version]:
-                shutil.copy2(build / "fmus" / f"{name}.fmu", staged / f"{name}.fmu")
-            shutil.rmtree(target, ignore_errors=True)
-            staged.rename(target)
+    cache.mkdir(parents=True, exist_ok=True)
+    # one build for all the xdist workers: the others wait on the lock, then find the set built
+    with open(cache / f".fmi{fmi_version}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not all((target / f"{name}.fmu").is_file() for name in NAMES[fmi_version]):
+            _build(fmi_version, cache, target)
     return {name: target / f"{name}.fmu" for name in NAMES[fmi_version]}
+
+
+def _build(fmi_version: int, cache: Path, target: Path) -> None:
+    """Configure and build the set with cmake in a temporary folder, renamed to `target` when complete."""
+    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        build = Path(tmp) / "build"
+        cmake = _cmake()
+        for command in ([cmake, "-S", str(SOURCE), "-B", str(build), f"-DFMI_VERSION={fmi_version}",
+                         "-DCMAKE_BUILD_TYPE=Release", "-DCMAKE_C_FLAGS=-Wno-error=stringop-truncation"],
+                        [cmake, "--build", str(build), "-j2"]):
+            done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+            if done.returncode:
+                pytest.fail(f"building the Reference FMUs failed: {' '.join(command)}\n{done.stderr[-3000:]}")
+        staged = Path(tmp) / "fmus"
+        staged.mkdir()
+        for name in NAMES[fmi_version]:
+            shutil.copy2(build / "fmus" / f"{name}.fmu", staged / f"{name}.fmu")
+        shutil.rmtree(target, ignore_errors=True)
+        staged.rename(target)
