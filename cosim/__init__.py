@@ -41,6 +41,7 @@ from .errors import (
     FmuPlatformError,
     InvalidSettingError,
     SignalSpecError,
+    SimulationTerminated,
     SpecError,
     UnknownVariableError,
 )
@@ -109,6 +110,7 @@ __all__ = [
     "CosimError",
     "DataError",
     "FmiCallError",
+    "SimulationTerminated",
     "FmuFormatError",
     "FmuNotFoundError",
     "FmuPlant",

@@ -7,6 +7,8 @@ expected, and what to do.
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "CosimError",
     "FmuNotFoundError",
@@ -15,6 +17,7 @@ __all__ = [
     "UnknownVariableError",
     "InvalidSettingError",
     "FmiCallError",
+    "SimulationTerminated",
     "DataError",
     "SignalSpecError",
     "BuildError",
@@ -71,6 +74,29 @@ class FmiCallError(CosimError, RuntimeError):
         self.function = function
         self.status = status
         self.time = time
+
+
+class SimulationTerminated(CosimError):
+    """The FMU ended the simulation itself (fmi2Discard with fmi2Terminated, FMI 3 terminateSimulation).
+
+    Not a failure: :func:`cosim.simulate` keeps everything up to :attr:`time` and says
+    ``status: "terminated"``. Raised by :meth:`FmuPlant.step` with the outputs read at that time.
+
+    Attributes
+    ----------
+    time : float
+        When the FMU ended the simulation [s].
+    message : str
+        The FMU's last log message ("" if it logged none).
+    outputs : numpy.ndarray or None
+        The outputs at `time`, in the plant's output order.
+    """
+
+    def __init__(self, text: str, *, time: float, message: str = "", outputs: Any = None) -> None:
+        super().__init__(text)
+        self.time = time
+        self.message = message
+        self.outputs = outputs
 
 
 class DataError(CosimError, ValueError):

@@ -160,7 +160,7 @@ def test_fmu_without_binary_for_this_platform(fmu, tmp_path):
     ({"parameters": {"Jmm": 1.0}}, "Jm"),          # suggests the near name
     ({"parameters": {"theta_m": 1.0}}, "not a parameter"),
     ({"start": {"nothing": 1.0}}, "no variable named"),
-    ({"inputs": ["Tq"]}, "no real input"),
+    ({"inputs": ["Tq"]}, "no input named"),
 ])
 def test_unknown_names(fmu, kwargs, match):
     with pytest.raises(UnknownVariableError, match=match) as err:
@@ -349,5 +349,5 @@ def test_any_float_variable_can_be_recorded_not_only_outputs(fmu):
     every = simulate(fmu, {"Tm": 1000.0}, duration=0.01, dt=1e-3, outputs="all")
     assert {"theta_L", "der_omega_L", "KL"} <= set(every.names) and "time" not in every.names
     assert simulate(fmu, duration=0.01, dt=1e-3).names == ("Tm", "TL", "theta_m", "omega_m", "theta_L", "omega_L")
-    with pytest.raises(UnknownVariableError, match="has no real variable named 'der_omega_x'"):
+    with pytest.raises(UnknownVariableError, match="has no variable named 'der_omega_x'"):
         FmuPlant(fmu, dt=1e-3, outputs=["der_omega_x"])

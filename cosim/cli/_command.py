@@ -91,6 +91,34 @@ def _pairs(items: tuple[str, ...], option: str) -> dict[str, str]:
     return out
 
 
+def _settings(items: tuple[str, ...], option: str) -> dict[str, Any]:
+    """``--set``/``--start`` values by name, each as its text writes it: a number (``0.3``, ``1/2257``), an
+    array (``A=[[0,1],[-2,-3]]``, JSON), true/false, else the text itself (a String variable's value). The FMU's
+    variable types check them when they are applied.
+
+    Examples
+    --------
+    >>> _settings(("Fc=1/4", "A=[[0,1],[-2,-3]]", "on=true", "label=left"), "--set")
+    {'Fc': 0.25, 'A': [[0, 1], [-2, -3]], 'on': True, 'label': 'left'}
+    """
+    out: dict[str, Any] = {}
+    for name, text in _pairs(items, option).items():
+        if text.startswith("["):
+            try:
+                out[name] = json.loads(text)
+            except json.JSONDecodeError:
+                raise InvalidSettingError(f"{option} {name}={text}: not an array; write rows in brackets, "
+                                          f"e.g. {name}=[[0,1],[-2,-3]]") from None
+        elif text.lower() in ("true", "false"):
+            out[name] = text.lower() == "true"
+        else:
+            try:
+                out[name] = parse_number(text, what=f"{option} {name}")
+            except InvalidSettingError:
+                out[name] = text
+    return out
+
+
 def _resolve_fmu(path: str) -> Path:
     """`bundled` (or `bundled3` for FMI 3.0) names the bundled two-mass servo FMU."""
     if path in ("bundled", "bundled3"):

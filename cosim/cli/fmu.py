@@ -51,10 +51,12 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
       cosim fmu info bundled
       cosim fmu info bundled --all --json
     """
+    from ..plant._variables import shape_of
     from ..plant.model_description import open_model_description
 
     fmu_path = _resolve_fmu(path)
     md = open_model_description(fmu_path)
+    starts = {v.name: v.start for v in md.modelVariables}
 
     def describe(v: Any) -> dict[str, Any]:
         d = {"name": v.name, "type": v.type, "unit": v.unit or "", "start": _typed(v.type, v.start),
@@ -62,6 +64,8 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
         for key in ("min", "max"):
             if getattr(v, key, None) not in (None, ""):
                 d[key] = _typed(v.type, getattr(v, key))
+        if getattr(v, "dimensions", None):  # an FMI 3 array: its elements are the signals v[1,1]...
+            d["shape"] = list(shape_of(v, starts))
         return d
 
     groups = {c: [describe(v) for v in md.modelVariables if v.causality == c]
@@ -83,7 +87,8 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
         for d in info[key]:
             rng = f"  [{d.get('min', '')}, {d.get('max', '')}]" if "min" in d or "max" in d else ""
             start = "" if d["start"] is None else d["start"]
-            lines.append(f"    {d['name']:<12} {start!s:>10} {d['unit']:<12}{rng}  {d['description']}")
+            kind = d["type"] + (f"[{'x'.join(map(str, d['shape']))}]" if "shape" in d else "")
+            lines.append(f"    {d['name']:<12} {kind:<10} {start!s:>10} {d['unit']:<12}{rng}  {d['description']}")
     lines.append(f"  states: {', '.join(states) or 'not declared'}")
     _emit(as_json, info, "\n".join(lines))
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import InvalidSettingError
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _names, _pairs, _resolve_fmu
+from ._command import _emit, _friendly, _names, _pairs, _resolve_fmu, _settings
 
 __all__ = ["data", "simulate"]
 
@@ -29,8 +29,11 @@ __all__ = ["data", "simulate"]
               help="Time column of --input-file (default t, else time).")
 @click.option("--duration", default=None, help="Length of the run [s] (required without --input-file).")
 @click.option("--dt", default=None, help="Communication step [s], e.g. 1/2257 (required without --input-file).")
-@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE", help="Parameter value, e.g. Fc=0.3.")
-@click.option("--start", "starts", multiple=True, metavar="NAME=VALUE", help="Start value, e.g. theta_m=-2.")
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
+              help="Parameter value, e.g. Fc=0.3; an array element A[1,2]=0.5 or a whole array A=[[0,1],[-2,-3]]; "
+                   "true/false; text for a String.")
+@click.option("--start", "starts", multiple=True, metavar="NAME=VALUE",
+              help="Start value, e.g. theta_m=-2 (values as for --set).")
 @click.option("--noise", default="0", show_default=True,
               help="Measurement noise level: std = level x std of the clean signal, per state/output.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise.")
@@ -58,11 +61,11 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     from ..data.simulation import simulate as run
 
     fmu_path = _resolve_fmu(path)
-    parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
-    start = {k: parse_number(v, what=f"--start {k}") for k, v in _pairs(starts, "--start").items()}
+    parameters = _settings(sets, "--set")
+    start = _settings(starts, "--start")
     level = parse_number(noise, what="--noise")
     signals: dict = dict(_pairs(inputs, "--input"))
-    t0, note = 0.0, ""
+    t0, note = None, ""
     if input_file:
         record_signals, t0, step, span, note = _recorded(fmu_path, input_file, time_column, hold, dt, duration,
                                                          set(signals))
@@ -78,13 +81,21 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     if out:
         traj.write(out)
     final = {name: float(traj[name][-1]) for name in traj.names}
-    summary = {"path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path), "samples": len(traj),
+    status = traj.meta.get("status", "completed")
+    summary = {"status": status, "path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path),
+               "samples": len(traj),
                "dt": traj.meta["dt"], "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
                "noise": level, "seed": seed, "final": final}
+    ended = ""
+    if status == "terminated":
+        summary["terminated"] = traj.meta["terminated"]
+        said = traj.meta["terminated"]["message"]
+        ended = (f"; the FMU ended the simulation at t={traj.meta['terminated']['time']:.9g} s"
+                 + (f" ({said})" if said else " (it gave no message)") + ", everything until then is kept")
     if input_file:
         summary["input_file"] = {"path": input_file, "hold": hold, "note": note}
     text = (f"simulated {len(traj)} samples of {', '.join(traj.names)}"
-            + (f" with {level:g} noise" if level else "") + (f"; {note}" if note else "")
+            + (f" with {level:g} noise" if level else "") + ended + (f"; {note}" if note else "")
             + (f"; wrote {out}" if out else ""))
     _emit(as_json, summary, text)
 
@@ -105,11 +116,11 @@ def _recorded(fmu_path: Path, input_file: str, time_column: str | None, hold: st
     a note saying what was taken and how it is held)."""
     from ..data.datafile import load_data
     from ..data.simulation import recorded_inputs, steps_for
-    from ..plant.fmu_plant import REAL_TYPES
+    from ..plant._variables import NUMERIC, expand_signals
     from ..plant.model_description import open_model_description
 
-    names = [v.name for v in open_model_description(fmu_path).modelVariables
-             if v.causality == "input" and v.type in REAL_TYPES]
+    names = [s.name for s in expand_signals(open_model_description(fmu_path).modelVariables).values()
+             if s.var.causality == "input" and s.kind in NUMERIC and not (s.shape and s.offset is None)]
     record = load_data(input_file, time=time_column, excitation=False)
     found = [n for n in names if n in record.names]
     if not found:

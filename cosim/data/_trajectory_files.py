@@ -55,6 +55,17 @@ def _header(traj: Trajectory) -> dict[str, Any]:
             "roles": dict(zip(traj.names, traj.roles, strict=True)), "meta": traj.meta}
 
 
+def _column(traj: Trajectory, i: int) -> np.ndarray:
+    """Column `i` as written: whole numbers for an integer or Boolean variable of the FMU that gave it
+    (``meta["types"]``, e.g. Int32, UInt8, Boolean as 0/1), floats otherwise."""
+    values = traj.values[:, i]
+    fmi_type = (traj.meta.get("types") or {}).get(traj.names[i])
+    if fmi_type and fmi_type not in ("Float32", "Float64", "Real") and np.all(values == np.round(values)) \
+            and np.all(np.abs(values) < 2.0**63):
+        return values.astype(np.int64)
+    return values
+
+
 def sidecar_path(path: str | os.PathLike) -> Path:
     """The metadata file beside a CSV: ``run.csv`` -> ``run.meta.json``."""
     path = Path(path)
@@ -68,7 +79,7 @@ def write_csv(traj: Trajectory, path: str | os.PathLike) -> Path:
     """
     import pandas as pd
 
-    frame = pd.DataFrame(traj.values, columns=list(traj.names))
+    frame = pd.DataFrame({name: _column(traj, i) for i, name in enumerate(traj.names)}, columns=list(traj.names))
     frame.insert(0, _TIME, traj.time)
     dt = float(np.median(np.diff(traj.time))) if len(traj) > 1 and traj.is_uniform() else None
     sidecar = {"format": _FORMAT, "version": _SIDECAR_VERSION, "data": Path(path).name,
@@ -85,7 +96,7 @@ def write_parquet(traj: Trajectory, path: str | os.PathLike) -> Path:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    columns = [pa.array(traj.time)] + [pa.array(traj.values[:, i]) for i in range(len(traj.names))]
+    columns = [pa.array(traj.time)] + [pa.array(_column(traj, i)) for i in range(len(traj.names))]
     table = pa.Table.from_arrays(columns, names=[_TIME, *traj.names])
     header = json.dumps({"version": _VERSION, **_header(traj)}).encode()
     table = table.replace_schema_metadata({_PARQUET_KEY: header})

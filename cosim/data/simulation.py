@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidSettingError, UnknownVariableError
+from ..errors import InvalidSettingError, SimulationTerminated
 from ..numbers import check_memory
 from ..plant.fmu_plant import FmuPlant
 from .signals import Signal, parse_signal
@@ -141,7 +141,7 @@ def simulate(
     dt: float,
     parameters: Mapping[str, float] | None = None,
     start: Mapping[str, float] | None = None,
-    t0: float = 0.0,
+    t0: float | None = None,
     outputs: list[str] | str | None = None,
     progress: bool | None = None,
 ) -> Trajectory:
@@ -157,10 +157,10 @@ def simulate(
         Length of the run and communication step, in seconds; `duration` is a whole number of steps.
     parameters, start : mapping, optional
         Parameter values and start values by name (see :class:`FmuPlant`).
-    t0 : float
-        Start time.
+    t0 : float, optional
+        Start time (default: the FMU's DefaultExperiment startTime, else 0).
     outputs : list of str or "all", optional
-        Variables to record (default: the FMU's outputs). Any scalar Float variable may be named: an output, a
+        Variables to record (default: the FMU's outputs). Any numeric variable may be named: an output, a
         state or local variable the FMU does not declare as an output (``"mass.s"``), a parameter; ``"all"``
         records every one of them.
     progress : bool or None, default None
@@ -171,7 +171,11 @@ def simulate(
     -------
     Trajectory
         Time ``t0 + k*dt`` for k = 0..n, the inputs (role ``input``), the outputs (role ``state`` when the
-        FMU declares them as states, else ``output``); ``meta`` holds the FMU, dt, parameters and start values.
+        FMU declares them as states, else ``output``); ``meta`` holds the FMU, dt, parameters and start values,
+        the FMI type of every integer or Boolean column (``types``: written as whole numbers), and ``status``:
+        ``"completed"``, or ``"terminated"`` when the FMU ended the simulation itself (Stair at 9 s): the record
+        then stops at that time, its last row read there, and ``meta["terminated"]`` holds the time and the
+        FMU's last message.
 
     Examples
     --------
@@ -187,35 +191,45 @@ def simulate(
     check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
     with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs) as plant:
-        unknown = [name for name in inputs if name not in plant.inputs]
-        if unknown:
-            raise UnknownVariableError(f"{plant.path.name} has no real input named {unknown[0]!r}; "
-                                       f"its inputs are: {', '.join(plant.inputs) or 'none'}")
+        plant.check_names(list(inputs), "input")
         check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
                      what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
                      hint="use a larger dt, a shorter duration or fewer outputs")
+        t0 = plant.t0
         t = t0 + dt * np.arange(n + 1)
         u = np.empty((n + 1, len(plant.inputs)))
         start_values = plant.get(plant.inputs)
         for j, name in enumerate(plant.inputs):
-            var = plant.variables[name]
+            var = plant.variable(name)
             maximum = float(var.max) if getattr(var, "max", None) not in (None, "") else None
             u[:, j] = sample_input(name, inputs[name], t, maximum=maximum) if name in inputs else start_values[j]
         y = np.empty((n + 1, len(plant.outputs)))
+        if plant.inputs:
+            plant.set_inputs(u[0])  # the first row's outputs with the first row's inputs (direct feedthrough)
         y[0] = plant.read_outputs()
         from tqdm.auto import tqdm  # tqdm.auto costs tens of ms to import (asyncio): only when simulating
 
         # disable=None lets tqdm show the bar only on a terminal
         disable = (None if n >= _PROGRESS_MIN_STEPS else True) if progress is None else not progress
+        ended = None
         with tqdm(total=n, unit="step", desc=f"simulate {plant.path.stem}", disable=disable, leave=False) as bar:
             for first in range(0, n, _CHUNK):
                 last = min(first + _CHUNK, n)
-                y[first + 1:last + 1] = plant.run(u[first:last])
+                try:
+                    y[first + 1:last + 1] = plant.run(u[first:last])
+                except SimulationTerminated as exc:  # the FMU ended the run: keep everything up to its end
+                    ended, k = exc, first + len(exc.completed)
+                    y[first + 1:k + 1] = exc.completed
+                    y[k + 1] = exc.outputs
+                    t, u, y = t[:k + 2].copy(), u[:k + 2], y[:k + 2]
+                    t[-1] = exc.time
+                    break
                 bar.update(last - first)
-        variables = plant.variables
         names = list(plant.inputs) + list(plant.outputs)
         roles = {name: "input" for name in plant.inputs}
         roles.update({name: "state" if name in plant.states else "output" for name in plant.outputs})
+        types = plant.types
+        units = {name: _unit(plant.variable(name)) for name in names}
         meta = {
             "source": "fmu",
             "fmu": plant.path.name,
@@ -228,6 +242,11 @@ def simulate(
             "start": dict(start or {}),
             "inputs": {name: str(spec) if not isinstance(spec, np.ndarray) else "samples"
                        for name, spec in inputs.items()},
+            "status": "completed" if ended is None else "terminated",
         }
+        if types:
+            meta["types"] = types  # integer and Boolean columns: written as whole numbers
+        if ended is not None:
+            meta["terminated"] = {"time": ended.time, "message": ended.message}
     data = dict(zip(names, np.hstack([u, y]).T, strict=True))
-    return Trajectory.from_arrays(t, data, units={k: _unit(variables[k]) for k in names}, roles=roles, meta=meta)
+    return Trajectory.from_arrays(t, data, units=units, roles=roles, meta=meta)

@@ -10,7 +10,8 @@ goes through a generic wrapper on every call, which costs more than the model it
 is still used for everything it does well (reading the model description, extracting, loading the library,
 instantiating); only the three calls of the hot path are bound here.
 
-Time is ``t0 + k*dt`` (never accumulated) and the input passed to :meth:`FmuPlant.step` is held constant
+Time is ``t0 + k*dt`` (never accumulated); step k goes from ``t0 + k*dt`` to exactly ``t0 + (k+1)*dt`` (its
+length is their difference, as FMPy computes it) and the input passed to :meth:`FmuPlant.step` is held constant
 over the step (zero-order hold).
 
 The FMU file is checked and its model description read by :func:`~cosim.plant.model_description.open_model_description`;
@@ -29,7 +30,6 @@ Examples
 from __future__ import annotations
 
 import collections
-import ctypes
 import logging
 import math
 import os
@@ -40,16 +40,25 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import FmiCallError, FmuPlatformError, InvalidSettingError, UnknownVariableError
+from ..errors import (
+    FmiCallError,
+    FmuPlatformError,
+    InvalidSettingError,
+    SimulationTerminated,
+    UnknownVariableError,
+)
 from ._fmi_callbacks import fmi2_callbacks
 from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
+from ._stepping import _input_value, _Stepping
+from ._variables import NUMERIC, Signal, array_value, expand_signals, unknown_element
 from .model_description import _close_matches, open_model_description
 
 __all__ = ["FmuPlant"]
 
 _log = logging.getLogger("cosim.fmu")
 
-class FmuPlant:
+
+class FmuPlant(_Stepping):
     """A co-simulation FMU driven at a fixed communication step.
 
     Parameters
@@ -63,11 +72,13 @@ class FmuPlant:
     start : mapping, optional
         Start values by name (for instance the initial states ``{"theta_m": -2.0}``), applied before
         initialisation. Any variable with a start value can be set.
-    t0 : float
-        Start time.
+    t0 : float, optional
+        Start time. Default: the FMU's DefaultExperiment startTime, else 0.
     inputs, outputs : sequence of str, optional
-        The real inputs driven by :meth:`step`, and the real outputs it returns, in this order.
-        Default: all of them, in modelDescription order.
+        The inputs driven by :meth:`step`, and the variables it returns, in this order: numbers of any FMI type
+        (Float32/64, integers, Booleans and Enumerations, passed as floats) and FMI 3 array elements by name
+        (``u[1]``, ``A[1,2]``, row-major, from 1). Default: every numeric input and output, in modelDescription
+        order. `outputs` may also name states and local variables, or be ``"all"``.
     instance_name : str
         Name of the FMU instance (appears in the FMU's log messages).
 
@@ -94,7 +105,7 @@ class FmuPlant:
         dt: float | None = None,
         parameters: Mapping[str, float] | None = None,
         start: Mapping[str, float] | None = None,
-        t0: float = 0.0,
+        t0: float | None = None,
         inputs: Sequence[str] | None = None,
         outputs: Sequence[str] | None = None,
         instance_name: str = "cosim",
@@ -108,14 +119,16 @@ class FmuPlant:
         self.model_description = md
         self.fmi_version = "2.0" if md.fmiVersion == "2.0" else "3.0"
         self._vars = {v.name: v for v in md.modelVariables}
-        real_in = [v.name for v in md.modelVariables if v.causality == "input" and v.type in REAL_TYPES]
-        real_out = [v.name for v in md.modelVariables if v.causality == "output" and v.type in REAL_TYPES]
+        # every value by name, FMI 3 arrays element by element (A[1,2]); only numbers are driven and recorded
+        self._signals = expand_signals(md.modelVariables)
+        numeric = [s for s in self._signals.values() if s.kind in NUMERIC and not (s.shape and s.offset is None)]
+        all_in = [s.name for s in numeric if s.var.causality == "input"]
+        all_out = [s.name for s in numeric if s.var.causality == "output"]
         # anything else a user may record: a state or local (Modelica tools often expose a plant's position only
-        # as `mass.s`), a calculated parameter... every scalar Float variable but time and the inputs
-        recordable = [v.name for v in md.modelVariables if v.type in REAL_TYPES and v.causality != "independent"
-                      and not getattr(v, "dimensions", None) and v.name not in real_in]
-        self.inputs = tuple(self._choose(inputs, real_in, "input"))
-        self.outputs = tuple(recordable if outputs == "all" else real_out if outputs is None
+        # as `mass.s`), a calculated parameter... every number but time and the inputs
+        recordable = [s.name for s in numeric if s.var.causality not in ("independent", "input")]
+        self.inputs = tuple(self._choose(inputs, all_in, "input"))
+        self.outputs = tuple(recordable if outputs == "all" else all_out if outputs is None
                              else self._choose(outputs, recordable, "variable"))
         self._param_names = tuple(v.name for v in md.modelVariables
                                   if v.causality == "parameter" and v.variability in ("fixed", "tunable"))
@@ -123,17 +136,21 @@ class FmuPlant:
         for v in md.modelVariables:
             if getattr(v, "derivative", None) is not None:
                 derivative_of[v.derivative.name] = v.name
-        self.states = tuple(name for name in self.outputs if name in derivative_of)
+        self.states = tuple(name for name in self.outputs if self._signals[name].var.name in derivative_of)
         if dt is None:
             default = md.defaultExperiment
             dt = float(default.stepSize) if default is not None and default.stepSize else None
             if dt is None:
                 raise InvalidSettingError(f"{self.path.name} declares no default step size; pass dt=...")
         self._dt = self._check_dt(dt)
+        if t0 is None:  # the FMU's DefaultExperiment startTime, as FMPy and the exporting tools start
+            default = md.defaultExperiment
+            t0 = float(default.startTime) if default is not None and default.startTime not in (None, "") else 0.0
         if not math.isfinite(t0):
             raise InvalidSettingError(f"t0 must be a finite number, got {t0}")
         self._t0 = float(t0)
         self._counter = [0]  # steps taken since t0, shared with the bound step function
+        self._ended_at: float | None = None  # when the FMU ended the simulation itself
         self._settings: dict[str, Any] = {}
         self._stage(parameters or {}, only_parameters=True)
         self._stage(start or {}, only_parameters=False)
@@ -145,14 +162,28 @@ class FmuPlant:
             raise
 
     # ------------------------------------------------------------------ discovery and settings
+    def check_names(self, names: Sequence[str], role: str = "input") -> None:
+        """Refuse, in one line, a name that is not one of :attr:`inputs` (``role="input"``) or :attr:`outputs`:
+        unknown (with the nearest names), not a number (a String), a whole array, an element out of range."""
+        self._choose(names, list(self.inputs if role == "input" else self.outputs), role)
+
     def _choose(self, chosen: Sequence[str] | None, available: list[str], role: str) -> list[str]:
         if chosen is None:
             return available
         chosen = [chosen] if isinstance(chosen, str) else list(chosen)
         for name in chosen:
-            if name not in available:
-                raise UnknownVariableError(f"{self.path.name} has no real {role} named {name!r}."
-                                           + _close_matches(name, available))
+            if name in available:
+                continue
+            signal = self._signals.get(name)
+            if signal is not None and signal.kind not in NUMERIC:
+                raise InvalidSettingError(f"{name} of {self.path.name} is a {signal.var.type} variable: only "
+                                          f"numbers can be {'driven' if role == 'input' else 'recorded'}; "
+                                          f"set it before the run with start={{{name!r}: ...}} (--start)")
+            if signal is not None and signal.shape and signal.offset is None:
+                raise InvalidSettingError(f"{name} of {self.path.name} is an array: name its elements, "
+                                          f"{name}[1]... (indices from 1)")
+            raise unknown_element(name, self._signals) or UnknownVariableError(
+                f"{self.path.name} has no {role} named {name!r}." + _close_matches(name, available))
         return chosen
 
     @staticmethod
@@ -172,19 +203,35 @@ class FmuPlant:
                                        + _close_matches(name, self._vars))
         return var
 
+    def _signal(self, name: str) -> Signal:
+        signal = self._signals.get(name)
+        if signal is None:
+            raise unknown_element(name, self._signals) or UnknownVariableError(
+                f"{self.path.name} has no variable named {name!r}." + _close_matches(name, self._vars))
+        return signal
+
     def _stage(self, values: Mapping[str, Any], *, only_parameters: bool) -> None:
-        """Validate values by name and keep them to apply at (re-)initialisation."""
+        """Validate values by name (a variable, a whole array, an array element) and keep them to apply at
+        (re-)initialisation."""
         for name, value in values.items():
-            var = self._variable(name)
-            if only_parameters and name not in self._param_names:
+            signal = self._signal(name)
+            var = signal.var
+            if only_parameters and var.name not in self._param_names:
                 raise UnknownVariableError(
                     f"{name!r} is not a parameter of {self.path.name} (its causality is {var.causality}); "
                     f"set start values with start=... Parameters: {', '.join(self._param_names) or 'none'}")
             if not only_parameters and var.start is None and var.causality != "input":
                 raise InvalidSettingError(f"{name!r} of {self.path.name} has no start value to set "
                                           f"(causality {var.causality}, initial {var.initial})")
-            self._settings[name] = coerce(var, value)
-
+            if not signal.shape:
+                self._settings[var.name] = coerce(var, value)
+            elif signal.offset is None:
+                self._settings[var.name] = [coerce(var, v) for v in array_value(signal, value)]
+            else:
+                whole = self._settings.get(var.name) or [coerce(var, v) for v in str(var.start).split()]
+                whole = list(whole) if len(whole) == signal.size else [whole[0]] * signal.size
+                whole[signal.offset] = coerce(var, value)
+                self._settings[var.name] = whole
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -208,7 +255,9 @@ class FmuPlant:
 
     @property
     def time(self) -> float:
-        """Current simulation time, ``t0 + k*dt``."""
+        """Current simulation time, ``t0 + k*dt`` (or when the FMU ended the simulation)."""
+        if self._ended_at is not None:
+            return self._ended_at
         return self.t0 + self._counter[0] * self.dt
 
     # ------------------------------------------------------------------ FMI life cycle
@@ -262,79 +311,6 @@ class FmuPlant:
         raise FmiCallError(f"{self.path.name}: {function} returned {status_name(status)}{when}{advice}",
                            function=function, status=status, time=at)
 
-    def _bind_hot_path(self) -> None:
-        """Bind the set-inputs / do-step / get-outputs calls once, with preallocated buffers.
-
-        The function objects are fresh (``dll[name]``, so FMPy's own stay untouched) and have no argtypes:
-        every argument is a prebuilt ctypes object, so ctypes converts nothing per call. This is what makes
-        a step cost about a third of FMPy's ``setReal``/``doStep``/``getReal``.
-        """
-        dll = self._fmu.dll
-        n_in, n_out = len(self.inputs), len(self.outputs)
-        u_vr, y_vr = self._value_refs(self.inputs), self._value_refs(self.outputs)
-        u_buf, y_buf = (ctypes.c_double * n_in)(), (ctypes.c_double * n_out)()
-        self._u_buf, self._y_buf = u_buf, y_buf
-        y_view = np.frombuffer(y_buf, dtype=np.float64)
-        self._y_view = y_view
-        self._n_in = n_in
-        n_in_c, n_out_c = ctypes.c_size_t(n_in), ctypes.c_size_t(n_out)
-        comp = ctypes.c_void_p(self._fmu.component)
-        t_c, h_c = ctypes.c_double(self.t0), ctypes.c_double(self.dt)
-        t0, dt, counter, fail, bad_input = self.t0, self.dt, self._counter, self._raise_call_error, self._bad_input
-        nonfinite = self._nonfinite_input
-        v2 = self.fmi_version == "2.0"
-        names = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep",
-                                                                         "fmi3GetFloat64")
-        self._get_name = names[2]
-        set_real, do_step, get_real = (dll[name] for name in names)
-        for f in (set_real, do_step, get_real):
-            f.restype = ctypes.c_int
-            f.argtypes = None
-        set_args = (comp, u_vr, n_in_c, u_buf) + (() if v2 else (n_in_c,))
-        get_args = (comp, y_vr, n_out_c, y_buf) + (() if v2 else (n_out_c,))
-        if v2:
-            step_args = (comp, t_c, h_c, ctypes.c_int(1))
-        else:
-            flags = [ctypes.c_bool() for _ in range(3)]
-            last_time = ctypes.c_double()
-            step_args = (comp, t_c, h_c, ctypes.c_bool(True), *map(ctypes.byref, flags), ctypes.byref(last_time))
-            terminated = flags[1]
-
-        def step(u: Sequence[float]) -> np.ndarray:
-            try:
-                u_buf[:] = u
-            except (ValueError, TypeError):
-                bad_input(u)
-            k = counter[0]
-            t = t0 + k * dt
-            total = sum(u_buf)
-            if total - total != 0.0:  # a NaN or an infinity (or a sum that overflowed: looked at one by one)
-                nonfinite(t)
-            t_c.value = t
-            status = set_real(*set_args)
-            if status > 1:
-                fail(names[0], status, t)
-            status = do_step(*step_args)
-            if status > 1:
-                fail(names[1], status, t)
-            if not v2 and terminated.value:
-                fail(names[1] + " (terminateSimulation)", 3, t)
-            status = get_real(*get_args)
-            if status > 1:
-                fail(names[2], status, t + dt)
-            counter[0] = k + 1
-            return y_view.copy()
-
-        def read() -> int:
-            return get_real(*get_args)
-
-        step.__doc__ = FmuPlant.step.__doc__
-        self.step = step  # the instance's own, bound to this FMU's buffers
-        self._call_get = read
-
-    def _value_refs(self, names: Sequence[str]) -> ctypes.Array:
-        return (ctypes.c_uint32 * len(names))(*[self._vars[n].valueReference for n in names])
-
     def _initialize(self) -> None:
         fmu = self._fmu
         self._apply_settings()
@@ -374,14 +350,32 @@ class FmuPlant:
         out = []
         fmu = self._fmu
         for name in names:
-            var = self._variable(name)
+            signal = self._signal(name)
             try:
-                out.append(read_value(fmu, self.fmi_version, var))
+                value = read_value(fmu, self.fmi_version, signal.var, signal.size if signal.shape else None)
             except InvalidSettingError:
                 raise
             except Exception as exc:
                 self._fmu_error("get " + name, exc)
+            if signal.shape:  # an array: the element, or the whole as nested lists
+                value = value[signal.offset] if signal.offset is not None else np.reshape(
+                    np.array(value, dtype=object), signal.shape).tolist()
+            out.append(value)
         return out
+
+    def set_inputs(self, u: Sequence[float]) -> None:
+        """Set the inputs now, without stepping, so that :meth:`read_outputs` shows their direct feedthrough
+        (``y = C x + D u`` at the start time). :meth:`step` sets them anyway."""
+        if len(u) != len(self.inputs):
+            self._bad_input(u)
+        for name, value in zip(self.inputs, u, strict=True):
+            signal = self._signals[name]
+            value = _input_value(signal, float(value), self.time)
+            if signal.shape:
+                whole = read_value(self._fmu, self.fmi_version, signal.var, signal.size)
+                whole[signal.offset] = value
+                value = whole
+            self._set_one(signal.var, value)
 
     def read_outputs(self) -> np.ndarray:
         """The outputs now, in :attr:`outputs` order (after initialisation: their initial values)."""
@@ -405,9 +399,9 @@ class FmuPlant:
         values = {**(values or {}), **kw}
         self._stage(values, only_parameters=True)
         for name in values:
-            var = self._vars[name]
+            var = self._signal(name).var
             if var.variability == "tunable":
-                self._set_one(var, self._settings[name])
+                self._set_one(var, self._settings[var.name])
 
     def reset(self, *, parameters: Mapping[str, Any] | None = None, start: Mapping[str, Any] | None = None) -> None:
         """Back to ``t0`` and the start values; applies the parameters and start values given so far.
@@ -426,6 +420,8 @@ class FmuPlant:
             self._fmu_error("reset", exc)
         self._initialized = False
         self._initialize()
+        self._ended_at = None
+        self._bind_hot_path()  # anew: the staged values of array inputs, and a step after the FMU ended
 
     # ------------------------------------------------------------------ the hot path
     def step(self, u: Sequence[float]) -> np.ndarray:
@@ -443,24 +439,6 @@ class FmuPlant:
         """
         return self.step(u)  # replaced per instance by the bound fast path (see _bind_hot_path)
 
-    def _bad_input(self, u: Any) -> None:
-        try:
-            n = len(u)
-        except TypeError:
-            raise InvalidSettingError(f"step() takes a sequence of {self._n_in} numbers "
-                                      f"({', '.join(self.inputs)}), got {u!r}") from None
-        if n != self._n_in:
-            raise InvalidSettingError(f"step() got {n} input values, expected {self._n_in} "
-                                      f"({', '.join(self.inputs)}), in that order")
-        raise InvalidSettingError(f"step() inputs must be numbers, got {u!r}")
-
-    def _nonfinite_input(self, t: float) -> None:
-        """Refuse a NaN or infinite input of the step at `t`, naming it (a finite one passes)."""
-        for name, value in zip(self.inputs, self._u_buf, strict=True):
-            if not math.isfinite(value):
-                raise InvalidSettingError(f"step() input {name} is {value} at t={t:.9g} s; inputs must be finite "
-                                          "numbers (check the controller or the signal feeding it)")
-
     def run(self, u: np.ndarray) -> np.ndarray:
         """Step through the rows of `u` (n_steps x n_inputs) and return the outputs after each step.
 
@@ -474,9 +452,24 @@ class FmuPlant:
             raise InvalidSettingError(f"input row {bad} is not finite ({u[bad]}); inputs must be finite")
         y = np.empty((u.shape[0], len(self.outputs)))
         step = self.step
-        for k, row in enumerate(u.tolist()):
-            y[k] = step(row)
+        k = 0
+        try:
+            for k, row in enumerate(u.tolist()):
+                y[k] = step(row)
+        except SimulationTerminated as ended:
+            ended.completed = y[:k]  # the outputs after the steps before the one the FMU ended in
+            raise
         return y
+
+    @property
+    def types(self) -> dict[str, str]:
+        """The FMI type of each input and output that is not a 64-bit float (``{"counter": "Int32"}``)."""
+        return {name: self._signals[name].var.type for name in self.inputs + self.outputs
+                if self._signals[name].var.type not in REAL_TYPES}
+
+    def variable(self, name: str) -> Any:
+        """The FMPy ``ModelVariable`` a signal name refers to (for an array element ``A[1,2]``: the array's)."""
+        return self._signal(name).var
 
     # ------------------------------------------------------------------ clean-up
     def close(self) -> None:
