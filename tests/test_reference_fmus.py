@@ -188,7 +188,8 @@ def test_a_state_that_is_not_an_output_is_recorded_as_fmpy_reads_it(ref):
      "A[4,1] is out of range: A is a 3x3 array, its elements are A[1,1] to A[3,3]"),
     (["simulate", "{StateSpace3}", "--duration", "1", "--dt", "0.1", "--set", "A=[[1,2],[3,4]]"],
      "A is a 3x3 array; got a value of shape 2x2"),
-    (["fmu", "info", "{Clocks3}"], "has no co-simulation interface (only Scheduled Execution)"),
+    (["fmu", "info", "{Clocks3}"], "has neither a co-simulation nor a Model Exchange interface (only Scheduled "
+                                   "Execution)"),
     (["fmu", "info", "{notanfmu}"], "is not an FMU: the zip has no modelDescription.xml"),
 ])
 def test_bad_input_is_one_line_exit_2(ref, tmp_path, args, message):
@@ -209,3 +210,62 @@ def test_api_errors_name_the_variable(ref):
         cosim.FmuPlant(ref[3]["StateSpace"], dt=0.1, outputs=["y[4]"])
     with pytest.raises(CosimError, match="y of StateSpace.fmu is an array: name its elements"):
         cosim.FmuPlant(ref[3]["StateSpace"], dt=0.1, outputs=["y"])
+
+
+def _on_grid(theirs, t: np.ndarray) -> np.ndarray:
+    """The rows of an FMPy Model Exchange result at the times `t`: FMPy also records a row before and after each
+    event; the last row at a time is the state after its events, which is what a communication point shows."""
+    rows = [np.nonzero(np.abs(theirs["time"] - ti) <= 1e-9 * max(1.0, abs(ti)))[0][-1] for ti in t]
+    return theirs[rows]
+
+
+ME_RUNS = [(v, name, solver) for v in (2, 3) for name in ("BouncingBall", "VanDerPol") for solver in ("cvode", "euler")]
+
+
+@pytest.mark.parametrize(("version", "name", "solver"), ME_RUNS, ids=[f"fmi{v}-{n}-{s}" for v, n, s in ME_RUNS])
+def test_model_exchange_gives_fmpys_outputs_with_the_same_solver(ref, version, name, solver):
+    """As Model Exchange, integrated by FMPy's CVode or Euler inside FmuPlant, BouncingBall (state events) and
+    VanDerPol give FMPy's own Model Exchange outputs at the communication points.
+
+    Both run the same solver with the same settings (tolerance and largest step from the default experiment, whose
+    stop time is the run's), so they agree far inside CVode's 1e-5: 1e-9 for CVode, 1e-12 for Euler."""
+    path = ref[version][name]
+    duration = 3.0 if name == "BouncingBall" else 20.0  # the default experiments' stop times
+    traj = cosim.simulate(path, duration=duration, dt=0.01, kind="me", solver=solver)
+    assert traj.meta["kind"] == "me" and traj.meta["solver"] == ("CVode" if solver == "cvode" else "Euler")
+    theirs = _on_grid(fmpy.simulate_fmu(str(path), fmi_type="ModelExchange", solver=traj.meta["solver"],
+                                        stop_time=duration, output_interval=0.01), traj.time)
+    tolerance = 1e-9 if solver == "cvode" else 1e-12
+    for column in ("h", "v") if name == "BouncingBall" else ("x0", "x1"):
+        np.testing.assert_allclose(traj[column], theirs[column], rtol=0, atol=tolerance, err_msg=column)
+    if name == "BouncingBall":
+        assert np.sum(np.diff(np.sign(traj["v"])) > 0) >= 3  # it bounced: the state events were met
+
+
+def test_a_pid_loop_runs_on_a_model_exchange_fmu(ref):
+    """A PID closed loop, unchanged, on StateSpace as Model Exchange (CVode): y[1] follows a step set-point."""
+    from controllers.pid import PID
+    from cosim.loop.closed_loop import closed_loop
+
+    pid = PID(kp=2.0, ki=4.0, dt=0.01, inputs="u[1]", outputs="y[1]", u_min=-50.0, u_max=50.0)
+    with cosim.FmuPlant(ref[3]["StateSpace"], dt=0.01, kind="me",
+                        parameters={"A": [[-1.0, 0, 0], [0, -1, 0], [0, 0, -1]],
+                                    "D": [[0.0] * 3] * 3}) as plant:
+        assert plant.kind == "me"
+        result = closed_loop(pid, plant, duration=6.0, reference=1.0, model=None)
+    y = result.fmu["y[1]"]
+    assert abs(y[-1] - 1.0) < 0.01 and abs(y[0]) < 1e-12  # from rest to the set-point
+
+
+def test_fmu_info_and_simulate_show_the_kind(ref, tmp_path):
+    runner = CliRunner()
+    info = json.loads(runner.invoke(cli, ["fmu", "info", str(ref[2]["VanDerPol"]), "--json"]).output)
+    assert info["kinds"] == ["cs", "me"]
+    done = runner.invoke(cli, ["simulate", str(ref[2]["VanDerPol"]), "--kind", "me", "--solver", "euler",
+                               "--duration", "1", "--dt", "0.01", "--json"])
+    assert done.exit_code == 0 and json.loads(done.output)["kind"] == "me", done.output
+    bundled = json.loads(runner.invoke(cli, ["fmu", "info", "bundled", "--json"]).output)
+    assert bundled["kinds"] == ["cs"]
+    done = runner.invoke(cli, ["simulate", "bundled", "--kind", "me", "--duration", "1", "--dt", "0.01"])
+    assert done.exit_code == 2 and done.output.count("\n") == 1
+    assert "has no Model Exchange interface (it has co-simulation); use --kind cs" in done.output

@@ -73,13 +73,16 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
     states = [v.derivative.name for v in md.modelVariables if getattr(v, "derivative", None) is not None]
     info = {
         "path": str(fmu_path), "model": md.modelName, "fmi_version": md.fmiVersion,
-        "model_identifier": md.coSimulation.modelIdentifier, "generation_tool": md.generationTool,
+        "model_identifier": (md.coSimulation or md.modelExchange).modelIdentifier,
+        "kinds": [k for k, i in (("cs", md.coSimulation), ("me", md.modelExchange)) if i is not None],
+        "generation_tool": md.generationTool,
         "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
         "states": states, **({"locals": groups["local"]} if show_all else {}),
         "default_step": _typed("Float64", getattr(md.defaultExperiment, "stepSize", None))
         if md.defaultExperiment else None,
     }
-    lines = [f"{md.modelName} (FMI {md.fmiVersion}, co-simulation, {md.generationTool or 'unknown tool'})",
+    kinds = " and ".join({"cs": "co-simulation", "me": "Model Exchange"}[k] for k in info["kinds"])
+    lines = [f"{md.modelName} (FMI {md.fmiVersion}, {kinds}, {md.generationTool or 'unknown tool'})",
              f"  file: {fmu_path}"]
     for title, key in (("inputs", "inputs"), ("outputs", "outputs"), ("parameters", "parameters"),
                        *((("locals", "locals"),) if show_all else ())):

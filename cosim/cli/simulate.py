@@ -42,12 +42,18 @@ __all__ = ["data", "simulate"]
 @click.option("--record", default=None, metavar="NAME,...|all",
               help="Variables to record (default: the FMU's outputs): outputs, states and local variables by name "
                    "(e.g. mass.s), or all (every Float variable).")
+@click.option("--kind", type=click.Choice(["cs", "me"]), default=None,
+              help="The FMU's interface: cs (co-simulation) or me (Model Exchange, integrated by FMPy's solvers). "
+                   "Default: cs when the FMU has it, else me.")
+@click.option("--solver", type=click.Choice(["cvode", "euler"]), default="cvode", show_default=True,
+              help="Solver of a Model Exchange FMU.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: long runs on a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
 def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: str, time_column: str | None,
              duration: str | None, dt: str | None, sets: tuple[str, ...], starts: tuple[str, ...], noise: str,
-             seed: int, out: str | None, record: str | None, progress: bool | None, as_json: bool) -> None:
+             seed: int, out: str | None, record: str | None, kind: str | None, solver: str, progress: bool | None,
+             as_json: bool) -> None:
     """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
 
     PATH is an .fmu file, or `bundled` for the bundled servo.
@@ -75,6 +81,7 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
         raise InvalidSettingError("give --dt and --duration (or --input-file, whose step and length they take)")
     traj = run(fmu_path, signals, duration=parse_number(duration, what="--duration"),
                dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress, t0=t0,
+               kind=kind, solver=solver,
                outputs=None if record is None else "all" if record.strip() == "all" else _names(record, "--record"))
     if level:
         traj = traj.with_noise(level, seed=seed)
@@ -82,7 +89,8 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
         traj.write(out)
     final = {name: float(traj[name][-1]) for name in traj.names}
     status = traj.meta.get("status", "completed")
-    summary = {"status": status, "path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path),
+    summary = {"status": status, "kind": traj.meta["kind"], "path": str(Path(out).resolve()) if out else None,
+               "fmu": str(fmu_path),
                "samples": len(traj),
                "dt": traj.meta["dt"], "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
                "noise": level, "seed": seed, "final": final}

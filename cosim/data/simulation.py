@@ -144,6 +144,8 @@ def simulate(
     t0: float | None = None,
     outputs: list[str] | str | None = None,
     progress: bool | None = None,
+    kind: str | None = None,
+    solver: str = "cvode",
 ) -> Trajectory:
     """Simulate a co-simulation FMU at a fixed step and return its trajectory.
 
@@ -163,6 +165,11 @@ def simulate(
         Variables to record (default: the FMU's outputs). Any numeric variable may be named: an output, a
         state or local variable the FMU does not declare as an output (``"mass.s"``), a parameter; ``"all"``
         records every one of them.
+    kind : {"cs", "me"}, optional
+        The FMU's interface: co-simulation, or Model Exchange integrated by FMPy's solvers (default: co-simulation
+        when the FMU has it, else Model Exchange).
+    solver : {"cvode", "euler"}
+        The solver of a Model Exchange FMU (FMPy's CVode, or forward Euler at the FMU's default step).
     progress : bool or None, default None
         Progress bar on stderr. None shows it for long runs (200,000 steps or more) and only when stderr is
         a terminal; True shows it anyway, False hides it.
@@ -190,7 +197,8 @@ def simulate(
     named = len(outputs) if isinstance(outputs, (list, tuple)) else 0
     check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
-    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs) as plant:
+    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs, kind=kind,
+                  solver=solver) as plant:
         plant.check_names(list(inputs), "input")
         check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
                      what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
@@ -235,6 +243,8 @@ def simulate(
             "fmu": plant.path.name,
             "model": plant.model_description.modelName,
             "fmi_version": plant.fmi_version,
+            "kind": plant.kind,
+            **({"solver": plant.solver} if plant.kind == "me" else {}),
             "dt": dt,
             "t0": t0,
             "intersample": "zoh",

@@ -247,7 +247,7 @@ def _references(reference: Any, tracked: Sequence[str], t: np.ndarray) -> np.nda
 def _limits_of(plant: FmuPlant, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = [], []
     for name in names:
-        var = plant.variables[name]
+        var = plant.variable(name)
         lo.append(float(var.min) if getattr(var, "min", None) not in (None, "") else -math.inf)
         hi.append(float(var.max) if getattr(var, "max", None) not in (None, "") else math.inf)
     return np.array(lo), np.array(hi)

@@ -57,13 +57,17 @@ class _Stepping:
         scalar 64-bit floats (integers, Booleans, Float32, array elements) go through FMPy's typed calls
         instead (:meth:`_bind_typed_path`), around the same bound ``doStep``.
         """
-        dll = self._fmu.dll
         n_in, n_out = len(self.inputs), len(self.outputs)
         u_buf, y_buf = (ctypes.c_double * n_in)(), (ctypes.c_double * n_out)()
         self._u_buf, self._y_buf = u_buf, y_buf
         y_view = np.frombuffer(y_buf, dtype=np.float64)
         self._y_view = y_view
         self._n_in = n_in
+        if self.kind == "me":  # a Model Exchange FMU: integrated in Python by FMPy's solvers, no doStep to bind
+            self._get_name = "get outputs"
+            self._bind_typed_path(self._advance_model_exchange)
+            return
+        dll = self._fmu.dll
         comp = ctypes.c_void_p(self._fmu.component)
         t_c, h_c = ctypes.c_double(self.t0), ctypes.c_double(self.dt)
         v2 = self.fmi_version == "2.0"
@@ -85,7 +89,15 @@ class _Stepping:
         fast = all(self._signals[n].var.type in REAL_TYPES and not self._signals[n].shape
                    for n in self.inputs + self.outputs)
         if not fast:
-            self._bind_typed_path(t_c, h_c, do_step, step_args)
+            terminated_flag = None if v2 else flags[1]
+
+            def advance(t: float, h: float) -> None:
+                t_c.value, h_c.value = t, h
+                status = do_step(*step_args)
+                if status > 1 or (terminated_flag is not None and terminated_flag.value):
+                    self._ended(status, t)
+
+            self._bind_typed_path(advance)
             return
         n_in_c, n_out_c = ctypes.c_size_t(n_in), ctypes.c_size_t(n_out)
         u_vr, y_vr = self._value_refs(self.inputs), self._value_refs(self.outputs)
@@ -126,12 +138,21 @@ class _Stepping:
         self.step = step  # the instance's own, bound to this FMU's buffers
         self._call_get = read
 
-    def _bind_typed_path(self, t_c: ctypes.c_double, h_c: ctypes.c_double, do_step: Any, step_args: tuple) -> None:
-        """The step for inputs or outputs of any numeric type or array elements, through FMPy's typed calls."""
+    def _advance_model_exchange(self, t: float, h: float) -> None:
+        """One communication step of a Model Exchange FMU (:class:`~cosim.plant.model_exchange.ModelExchangeSlave`)."""
+        try:
+            done = self._fmu.doStep(t, h)
+        except Exception as exc:  # FMPy's FMICallException or the solver's SolverError: function and status
+            self._fmu_error("doStep", exc)
+        if done:
+            self._ended(0, t)
+
+    def _bind_typed_path(self, advance: Any) -> None:
+        """The step for inputs or outputs of any numeric type or array elements, through FMPy's typed calls, around
+        ``advance(t, h)`` (the bound ``doStep`` of a co-simulation FMU, or a Model Exchange FMU's integration)."""
         fmu, version, signals = self._fmu, self.fmi_version, self._signals
-        t0, dt, counter, bad_input, ended = self.t0, self.dt, self._counter, self._bad_input, self._ended
+        t0, dt, counter, bad_input = self.t0, self.dt, self._counter, self._bad_input
         y_view, n_in = self._y_view, self._n_in
-        terminated = None if version == "2.0" else self._step_flags[0][1]
         # inputs: one write per variable; an array is written whole, from its staged or start values
         writes: dict[str, list] = {}
         for position, name in enumerate(self.inputs):
@@ -173,11 +194,7 @@ class _Stepping:
                     write_value(fmu, version, signal.var, whole)
                 except Exception as exc:
                     self._fmu_error("set " + signal.var.name, exc)
-            t_c.value = t
-            h_c.value = (t0 + (k + 1) * dt) - t  # the step ends exactly on the next point (as FMPy steps)
-            status = do_step(*step_args)
-            if status > 1 or (terminated is not None and terminated.value):
-                ended(status, t)
+            advance(t, (t0 + (k + 1) * dt) - t)  # the step ends exactly on the next point (as FMPy steps)
             try:
                 read()
             except Exception as exc:
@@ -191,9 +208,10 @@ class _Stepping:
 
     def _ended(self, status: int, t: float) -> None:
         """A doStep that did not complete: the FMU ended the simulation (SimulationTerminated), or it failed."""
-        flags, last_time = self._step_flags
         fmu = self._fmu
-        if self.fmi_version == "2.0":
+        if self.kind == "me":
+            at = fmu.terminated_at
+        elif self.fmi_version == "2.0":
             try:  # fmi2Discard: the FMU may have ended the simulation (fmi2Terminated, FMI 2.0 section 4.2.3)
                 ended = status == 2 and fmu.getBooleanStatus(3)
                 at = fmu.getRealStatus(2) if ended else None  # fmi2LastSuccessfulTime
@@ -204,6 +222,7 @@ class _Stepping:
         else:
             if status > 1:
                 self._raise_call_error("fmi3DoStep", status, t)
+            flags, last_time = self._step_flags
             at = last_time.value if flags[2].value else t + self.dt  # an early return ends before the step's end
         at = t + self.dt if at is None or not math.isfinite(at) else at
         self._counter[0] += 1

@@ -51,7 +51,8 @@ from ._fmi_callbacks import fmi2_callbacks
 from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
 from ._stepping import _input_value, _Stepping
 from ._variables import NUMERIC, Signal, array_value, expand_signals, unknown_element
-from .model_description import _close_matches, open_model_description
+from .model_description import _close_matches, interface_kind, open_model_description
+from .model_exchange import ModelExchangeSlave
 
 __all__ = ["FmuPlant"]
 
@@ -109,14 +110,22 @@ class FmuPlant(_Stepping):
         inputs: Sequence[str] | None = None,
         outputs: Sequence[str] | None = None,
         instance_name: str = "cosim",
+        kind: str | None = None,
+        solver: str = "cvode",
+        relative_tolerance: float | None = None,
     ) -> None:
         self.path = Path(fmu)
         self._fmu = None
         self._unzipdir: str | None = None
         self._initialized = False
         self._messages: collections.deque[str] = collections.deque(maxlen=8)
-        md = open_model_description(self.path)
+        md = open_model_description(self.path, kind)
         self.model_description = md
+        self.kind = interface_kind(md, kind)
+        if str(solver).lower() not in ("cvode", "euler"):
+            raise InvalidSettingError(f"solver={solver!r}; choose cvode or euler (FMPy's solvers for Model Exchange)")
+        self.solver = "CVode" if str(solver).lower() == "cvode" else "Euler"
+        self._relative_tolerance = relative_tolerance
         self.fmi_version = "2.0" if md.fmiVersion == "2.0" else "3.0"
         self._vars = {v.name: v for v in md.modelVariables}
         # every value by name, FMI 3 arrays element by element (A[1,2]); only numbers are driven and recorded
@@ -273,10 +282,15 @@ class FmuPlant(_Stepping):
 
         md = self.model_description
         self._unzipdir = fmpy.extract(str(self.path))
+        interface = md.coSimulation if self.kind == "cs" else md.modelExchange
         common = dict(guid=md.guid, unzipDirectory=self._unzipdir,
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance_name)
+                      modelIdentifier=interface.modelIdentifier, instanceName=instance_name)
         try:
-            if self.fmi_version == "2.0":
+            if self.kind == "me":  # integrated here by FMPy's solvers, stepped like a co-simulation slave
+                self._fmu = ModelExchangeSlave(**common, fmi_version=self.fmi_version, model_description=md,
+                                               solver=self.solver, relative_tolerance=self._relative_tolerance,
+                                               log=self._on_log)
+            elif self.fmi_version == "2.0":
                 self._fmu = fmpy.fmi2.FMU2Slave(**common)
             else:
                 self._fmu = fmpy.fmi3.FMU3Slave(**common)
@@ -295,8 +309,8 @@ class FmuPlant(_Stepping):
 
                 fmu.instantiate(logMessage=log_message)
         except Exception as exc:
-            self._fmu_error("fmi2Instantiate" if self.fmi_version == "2.0" else "fmi3InstantiateCoSimulation",
-                            exc)
+            self._fmu_error("fmi2Instantiate" if self.fmi_version == "2.0" else "fmi3Instantiate" +
+                            ("CoSimulation" if self.kind == "cs" else "ModelExchange"), exc)
         self._bind_hot_path()
 
     def _fmu_error(self, function: str, exc: Exception, status: int = 3) -> None:

@@ -14,21 +14,56 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import FmuFormatError, FmuNotFoundError, FmuPlatformError
+from ..errors import FmuFormatError, FmuNotFoundError, FmuPlatformError, InvalidSettingError
 
 if TYPE_CHECKING:
     from fmpy.model_description import ModelDescription
 
-__all__ = ["open_model_description"]
+__all__ = ["KINDS", "interface_kind", "open_model_description"]
+
+#: The FMI interfaces cosim drives: co-simulation (the FMU integrates itself) and Model Exchange (FMPy's solvers).
+KINDS = ("cs", "me")
+_KIND_NAMES = {"cs": "co-simulation", "me": "Model Exchange"}
 
 
-def open_model_description(fmu: str | os.PathLike) -> ModelDescription:
-    """Check that `fmu` is a usable co-simulation FMU for this platform and return its model description.
+def interface_kind(md: ModelDescription, kind: str | None = None) -> str:
+    """The interface an FMU is driven through: `kind` if the FMU has it, else co-simulation first, then Model
+    Exchange. FmuFormatError (one line) when it has neither, or not the one asked for.
+
+    Examples
+    --------
+    >>> from cosim import build_fmu
+    >>> interface_kind(open_model_description(build_fmu()))
+    'cs'
+    """
+    has = {"cs": md.coSimulation is not None, "me": md.modelExchange is not None}
+    if kind is not None:
+        if kind not in KINDS:
+            raise InvalidSettingError(f"kind={kind!r}; choose cs (co-simulation) or me (Model Exchange)")
+        if not has[kind]:
+            other = [k for k in KINDS if has[k]]
+            hint = f"; use --kind {other[0]}" if other else ""
+            raise FmuFormatError(f"{md.modelName} has no {_KIND_NAMES[kind]} interface (it has "
+                                 f"{', '.join(_KIND_NAMES[k] for k in other) or 'neither'}){hint}")
+        return kind
+    for k in KINDS:
+        if has[k]:
+            return k
+    scheduled = getattr(md, "scheduledExecution", None) is not None
+    what = "only Scheduled Execution" if scheduled else "no interface at all"
+    raise FmuFormatError(f"{md.modelName} has neither a co-simulation nor a Model Exchange interface ({what}); "
+                         "cosim steps co-simulation FMUs and integrates Model Exchange ones: re-export it with one")
+
+
+def open_model_description(fmu: str | os.PathLike, kind: str | None = None) -> ModelDescription:
+    """Check that `fmu` is a usable FMU for this platform and return its model description.
 
     Parameters
     ----------
     fmu : path-like
         Path of the ``.fmu`` file.
+    kind : {"cs", "me"}, optional
+        The interface to check (see :func:`interface_kind`); default: co-simulation, else Model Exchange.
 
     Returns
     -------
@@ -66,15 +101,12 @@ def open_model_description(fmu: str | os.PathLike) -> ModelDescription:
     if md.fmiVersion not in ("2.0",) and not str(md.fmiVersion).startswith("3."):
         raise FmuFormatError(f"{path} is an FMI {md.fmiVersion} FMU; cosim drives FMI 2.0 and 3.0 FMUs: "
                              "re-export it as FMI 2.0 or 3.0")
-    if md.coSimulation is None:
-        has = [kind for kind, interface in (("Model Exchange", md.modelExchange),
-                                            ("Scheduled Execution", getattr(md, "scheduledExecution", None)))
-               if interface is not None]
-        what = f"only {' and '.join(has)}" if has else "no interface at all"
-        raise FmuFormatError(f"{path} has no co-simulation interface ({what}); cosim steps co-simulation FMUs: "
-                             "re-export it with co-simulation enabled")
+    try:
+        interface = getattr(md, {"cs": "coSimulation", "me": "modelExchange"}[interface_kind(md, kind)])
+    except FmuFormatError as exc:
+        raise FmuFormatError(f"{path}: {exc}") from None
     platform = fmpy.platform if md.fmiVersion == "2.0" else fmpy.platform_tuple
-    library = f"binaries/{platform}/{md.coSimulation.modelIdentifier}{fmpy.sharedLibraryExtension}"
+    library = f"binaries/{platform}/{interface.modelIdentifier}{fmpy.sharedLibraryExtension}"
     if library not in names:
         found = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
         has = ", ".join(found) if found else "none"
