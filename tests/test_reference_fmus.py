@@ -140,7 +140,8 @@ def test_feedthrough_round_trips_every_type(ref, version):
 
 
 def test_statespace_with_a_set_a_matrix_is_control_forced_response(ref, tmp_path):
-    """StateSpace (FMI 3 arrays) with A and B set from the CLI gives python-control's response of the same system.
+    """StateSpace (FMI 3 arrays) with A and B set from the CLI gives python-control's response of the same system,
+    and its state x, a local variable recorded by name, python-control's states.
 
     The FMU's co-simulation integrates with forward Euler at a fixed 1 ms, so "the same system" is the discrete
     one Euler makes of it: x+ = (I + h A) x + h B u, y = C x + D u, h = 1 ms, simulated by
@@ -154,7 +155,8 @@ def test_statespace_with_a_set_a_matrix_is_control_forced_response(ref, tmp_path
     done = CliRunner().invoke(cli, [
         "simulate", str(ref[3]["StateSpace"]), "--duration", "2", "--dt", "0.01", "--set", f"A={a.tolist()}",
         "--set", "B[2,2]=1", "--set", "B[1,1]=0", "--set", "B[3,3]=0.5", "--set", "B[3,1]=1",
-        "--input", "u[1]=sine:value=1,freq=1", "--input", "u[2]=step:value=1,at=0.5", "-o", str(csv)])
+        "--input", "u[1]=sine:value=1,freq=1", "--input", "u[2]=step:value=1,at=0.5",
+        "--record", "y[1],y[2],y[3],x[1],x[2],x[3]", "-o", str(csv)])
     assert done.exit_code == 0, done.output
     table = pd.read_csv(csv)
     h, t = 1e-3, table["time"].to_numpy()
@@ -168,6 +170,8 @@ def test_statespace_with_a_set_a_matrix_is_control_forced_response(ref, tmp_path
     y[1:] += (np.eye(3) @ (u[:-1] - u[1:]).T).T
     np.testing.assert_allclose(table[["y[1]", "y[2]", "y[3]"]].to_numpy(), y, atol=1e-9)
     assert np.abs(y).max() > 0.1  # a response, not zeros
+    # the state x, a local variable (not an output), recorded by name: python-control's states
+    np.testing.assert_allclose(table[["x[1]", "x[2]", "x[3]"]].to_numpy(), response.states.T[::10], atol=1e-9)
 
 
 def test_a_state_that_is_not_an_output_is_recorded_as_fmpy_reads_it(ref):
