@@ -36,6 +36,7 @@ from typing import Any, ClassVar
 import control
 import numpy as np
 
+from cosim.data._names import control_label, label_name
 from cosim.errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
 from cosim.files import check_file_format, write_text_atomic
 
@@ -149,7 +150,8 @@ class DesignModel:
         ----------
         sys : control.StateSpace
             Continuous or discrete; its ``state_labels``, ``input_labels`` and ``output_labels`` name
-            the signals (``cosim.to_statespace`` sets them from the identified model).
+            the signals (``cosim.to_statespace`` sets them from the identified model; a label's ``:`` reads as
+            the ``.`` of a name as FMUs write it, ``mass:s`` as ``mass.s``: :func:`cosim.export.label_name`).
         dt : float, optional
             Controller sample time. Required for a continuous `sys`; for a discrete one it must equal
             ``sys.dt`` (or be left out).
@@ -170,13 +172,17 @@ class DesignModel:
                 raise InvalidSettingError(f"the model is discrete with dt={sys.dt}, but dt={dt} was asked; "
                                           "pass the continuous model or leave dt out")
             disc, dt = sys, sys.dt
-        return cls(A=disc.A, B=disc.B, C=disc.C, D=disc.D, dt=float(dt), states=tuple(sys.state_labels),
-                   inputs=tuple(sys.input_labels), outputs=tuple(sys.output_labels))
+        return cls(A=disc.A, B=disc.B, C=disc.C, D=disc.D, dt=float(dt),
+                   states=tuple(map(label_name, sys.state_labels)), inputs=tuple(map(label_name, sys.input_labels)),
+                   outputs=tuple(map(label_name, sys.output_labels)))
 
     def to_statespace(self) -> control.StateSpace:
-        """The model as a discrete named ``control.StateSpace``."""
-        return control.ss(self.A, self.B, self.C, self.D, self.dt, states=list(self.states),
-                          inputs=list(self.inputs), outputs=list(self.outputs))
+        """The model as a discrete named ``control.StateSpace`` (an input or output name's dots written ``:``, as
+        python-control wants them: :func:`cosim.export.control_label`)."""
+        return control.ss(self.A, self.B, self.C, self.D, self.dt,
+                          states=[control_label(s, keep_dots=True) for s in self.states],
+                          inputs=[control_label(u) for u in self.inputs],
+                          outputs=[control_label(y) for y in self.outputs])
 
     def index(self, names: Sequence[str], role: str) -> list[int]:
         """Positions of `names` among the model's `role` ("states", "inputs" or "outputs")."""

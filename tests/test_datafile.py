@@ -481,7 +481,7 @@ def test_constant_input_has_nothing_to_identify_from(mat):
     (["force=gtau*"], r"column 'force=gtau\*': 'gtau\*' is not an expression; write numbers and the file's"),
     (["force=sin(vir)"], r"'sin\(vir\)' is not allowed"),
     (["force=vir**2"], r"'vir \*\* 2' is not allowed"),
-    (["force=vir.real"], r"'vir.real' is not allowed"),
+    (["force=vir.real()"], r"'vir.real\(\)' is not allowed"),
     (["force=__import__('os')"], "is not allowed"),
     (["2x=vir"], "'2x' is not a usable name"),
     (["time=vir"], "'time' is not a usable name"),

@@ -98,8 +98,11 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
     from controllers.base import DesignModel
     from controllers.pid import tune_pid
 
+    from ..export import label_name
+
     sys_c, dt, _ = _design_model(model_path, dt_text)
-    signals = [o for o in outputs if o in sys_c.output_labels and not o.lower().endswith(".json")]
+    labels = [label_name(y) for y in sys_c.output_labels]
+    signals = [o for o in outputs if o in labels and not o.lower().endswith(".json")]
     files = [o for o in outputs if o not in signals] + ([old_out] if old_out else [])
     if old_out:
         _deprecated("--out FILE", "-o/--output FILE")
@@ -111,7 +114,7 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
     odd = [f for f in files if not f.lower().endswith(".json")]
     if odd:
         raise InvalidSettingError(f"-o/--output {odd[0]} is neither a .json file nor an output of the model "
-                                  f"({', '.join(sys_c.output_labels)}); write the controller to FILE.json and name "
+                                  f"({', '.join(labels)}); write the controller to FILE.json and name "
                                   "the tracked output with --tracked")
     if len(files) > 1:
         raise InvalidSettingError(f"one controller file, please: -o/--output was given {', '.join(files)}")

@@ -8,7 +8,7 @@ import click
 
 from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
-from ._command import _decimate_option, _emit, _friendly, _names, _pairs
+from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _split
 from ._data_options import data_options, derive_option, read_records
 
 __all__ = ["DIAGNOSE_MIN_SAMPLES", "diagnose_command"]
@@ -96,7 +96,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
             records, states=state_names, inputs=input_names)
         model, found_rows = estimator.model_, format_kinematics(estimator.kinematics_)
     levels = {name: parse_number(text, what=f"--noise {name}")
-              for name, text in _pairs(tuple(noise.split(",")), "--noise").items()} if noise else None
+              for name, text in _pairs(tuple(_split(noise)), "--noise").items()} if noise else None
     report = diagnose(model, records if len(records) > 1 else records[0], effects=selection,
                       max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor)
     payload = report.to_dict()

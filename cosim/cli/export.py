@@ -8,7 +8,7 @@ from typing import Any
 import click
 
 from ..numbers import parse_number
-from ._command import _emit, _friendly, _pairs
+from ._command import _emit, _friendly, _pairs, _split
 
 __all__ = ["export_command"]
 
@@ -17,7 +17,7 @@ def _name_values(text: str | None, option: str) -> dict[str, float] | None:
     """``"theta_m=0,omega_m=0.1"`` -> {"theta_m": 0.0, "omega_m": 0.1}."""
     if not text:
         return None
-    return {k: parse_number(v, what=f"{option} {k}") for k, v in _pairs(tuple(text.split(",")), option).items()}
+    return {k: parse_number(v, what=f"{option} {k}") for k, v in _pairs(tuple(_split(text)), option).items()}
 
 
 @click.command("export")

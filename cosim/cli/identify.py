@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from ..numbers import parse_number
-from ._command import _decimate_option, _emit, _friendly, _names, _pairs
+from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _split
 from ._data_options import data_options, derive_option, read_records
 
 __all__ = ["identify_command", "parse_kinematics_option", "format_kinematics"]
@@ -31,7 +31,7 @@ def parse_kinematics_option(text: str | None) -> str | dict[str, str]:
         return "auto"
     if text.strip().lower() == "none":
         return "none"
-    return {k: str(v) for k, v in _pairs(tuple(text.split(",")), "--kinematics").items()}
+    return {k: str(v) for k, v in _pairs(tuple(_split(text)), "--kinematics").items()}
 
 
 def format_kinematics(pairs: tuple) -> str:

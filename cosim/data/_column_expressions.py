@@ -13,6 +13,9 @@ them by index (a :class:`_Ref`):
 ``data[k,:]``
     row ``k`` of ``data`` (channels as rows, one column per time), e.g. ``"pos=data[2,:]"``.
 
+A variable may be named as FMUs write it (``"force=2*mass.f"``, ``"x[2]"``, ``"der(x)"``, ``"'my var'"``: see
+:mod:`._names`); brackets that hold a ``:`` or a ``0`` are a ``.mat`` index, never part of a name.
+
 Indices are 0-based, as in Python and NumPy: ``data[:,0]`` is the first column (MATLAB's ``data(:,1)``). ``k`` is
 a whole number written in the text; spaces are free (``data[:, 2]``), and an indexed variable may stand wherever a
 variable may (``"force=35.15*data[:,3]"``). Nothing else is accepted inside the brackets (no ranges, steps or
@@ -39,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidSettingError
+from ._names import is_name, parse_expression
 
 _OPS: dict[type, Callable[[Any, Any], Any]] = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply,
                                                ast.Div: np.divide}
@@ -137,7 +141,7 @@ def _parse_reference(text: str, where: str) -> _Ref | None:
     (_Ref(variable='data', axis=1, index=0), None)
     """
     try:
-        body = ast.parse(str(text).strip(), mode="eval").body
+        body = parse_expression(str(text).strip()).body
     except SyntaxError:
         return None
     return _subscript_ref(body, where) if isinstance(body, ast.Subscript) else None
@@ -188,11 +192,11 @@ def _check_node(node: ast.AST, spec: str) -> None:
 
 def _parse_column(name: str, text: str, spec: str) -> _Column:
     name, text = str(name).strip(), str(text).strip()
-    if not name.isidentifier() or name == "time":
+    if not is_name(name) or name == "time":
         raise InvalidSettingError(f"column {spec!r}: {name!r} is not a usable name; use letters, digits and _ "
-                                  "(not 'time'), e.g. force=gtau*vir")
+                                  "(not 'time'), or a name as FMUs write it (mass.s), e.g. force=gtau*vir")
     try:
-        tree = ast.parse(text, mode="eval")
+        tree = parse_expression(text)
     except SyntaxError:
         raise InvalidSettingError(f"column {spec!r}: {text!r} is not an expression; {_EXPRESSION_HELP}") from None
     _check_node(tree, spec)

@@ -98,7 +98,9 @@ def _missing(path: Path, names: Sequence[str], columns: Sequence[_Column]) -> No
             if var not in names:
                 base = var.partition("[")[0].strip()
                 hint = (f"; to read one column of the matrix {base}, name it: x={var} (indices are 0-based)"
-                        if column.plain and "[" in var and base in names else "; check the spelling")
+                        if column.plain and ":" in var and base in names else
+                        f"; {base} is a matrix: {_INDEX_HELP}" if "[" in var and base in names else
+                        "; check the spelling")
                 raise UnknownVariableError(f"{path.name} has no variable {var!r} (column {column.describe()!r}); "
                                            f"it has: {_listing(names)}{hint}")
 

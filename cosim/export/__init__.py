@@ -23,11 +23,19 @@ from ..errors import InvalidSettingError
 from ..identify.model import IdentifiedModel
 from .fmu import export_fmu
 from .matlab import export_mat
-from .statespace import CONSTANT_INPUT, CONSTANT_MODES, OperatingPoint, operating_point, to_statespace
+from .statespace import (
+    CONSTANT_INPUT,
+    CONSTANT_MODES,
+    OperatingPoint,
+    control_label,
+    label_name,
+    operating_point,
+    to_statespace,
+)
 
 __all__ = [
-    "CONSTANT_INPUT", "CONSTANT_MODES", "OperatingPoint", "export", "export_fmu", "export_mat", "operating_point",
-    "to_statespace",
+    "CONSTANT_INPUT", "CONSTANT_MODES", "OperatingPoint", "control_label", "export", "export_fmu", "export_mat",
+    "label_name", "operating_point", "to_statespace",
 ]
 
 

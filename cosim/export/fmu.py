@@ -45,6 +45,11 @@ _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 def _check_fmu_names(model: IdentifiedModel) -> None:
+    """Refuse a name the FMU cannot hold. Names as FMUs write them (``mass.s``, ``x[2]``, ``der(x)``) are kept
+    in the modelDescription (flat naming) and never reach the C code (which indexes ``x[i]``, ``u[j]``); only a
+    name the FMU's own variables take (``time``, ``dt``, ``nsub``) is refused. A state or input named
+    ``der(<state>)`` (a velocity measured as a Modelica derivative) stands for that state's derivative
+    variable, which is then not declared (:func:`_model_description`)."""
     for role, names in (("state", model.states), ("input", model.inputs)):
         for name in names:
             why = ""
@@ -52,8 +57,8 @@ def _check_fmu_names(model: IdentifiedModel) -> None:
                 why = "is blank"
             elif any(ord(ch) < 32 or ord(ch) == 127 for ch in name):
                 why = "holds a control character"
-            elif name in _RESERVED or name.startswith("der("):
-                why = f"is reserved in the exported FMU ({', '.join(_RESERVED)}, der(...))"
+            elif name in _RESERVED:
+                why = f"is reserved in the exported FMU ({', '.join(_RESERVED)})"
             if why:
                 raise InvalidSettingError(f"cannot export to FMU: the {role} name {name!r} {why}; rename the {role} "
                                           "in the model")
@@ -63,7 +68,7 @@ def _check_fmu_terms(model: IdentifiedModel) -> None:
     for k, text in enumerate(model.terms):
         if not np.any(model.coef[:, k]):
             continue
-        for node in ast.walk(ast.parse(text, mode="eval")):
+        for node in ast.walk(Term(text)._tree):  # names as FMUs write them (mass.s) parse too
             if isinstance(node, ast.Call):
                 fname = node.func.id  # type: ignore[attr-defined]
                 c_name = FUNCTIONS.get(fname, (None, None, None))[2]
@@ -222,8 +227,11 @@ def _model_description(model: IdentifiedModel, identifier: str, guid: str, dt: f
     for i, name in enumerate(model.states):
         real(name, 1 + m + i, "State (the start value sets the initial state)",
              {"causality": "output", "variability": "continuous", "initial": "exact"}, {**unit_of(name), "start": "0"})
-    for i, name in enumerate(model.states):
-        real(f"der({name})", 1 + m + n + i, f"Derivative of {name}",
+    taken = set(model.states) | set(model.inputs)
+    derivatives = [(i, f"der({name})") for i, name in enumerate(model.states) if f"der({name})" not in taken]
+    for i, der_name in derivatives:
+        name = model.states[i]
+        real(der_name, 1 + m + n + i, f"Derivative of {name}",
              {"causality": "local", "variability": "continuous"}, {"derivative": str(2 + m + i), **unit_of(name, "/s")})
     if linear:
         real("dt", 1 + m + 2 * n, "Step the exact zero-order-hold discretisation was computed for",
@@ -238,11 +246,11 @@ def _model_description(model: IdentifiedModel, identifier: str, guid: str, dt: f
     outputs = ET.SubElement(structure, "Outputs")
     for i in range(n):
         ET.SubElement(outputs, "Unknown", {"index": str(2 + m + i), "dependencies": ""})
-    derivatives = ET.SubElement(structure, "Derivatives")
+    derivative_list = ET.SubElement(structure, "Derivatives")
     initial = ET.SubElement(structure, "InitialUnknowns")
-    for i in range(n):
-        ET.SubElement(derivatives, "Unknown", {"index": str(2 + m + n + i)})
-        ET.SubElement(initial, "Unknown", {"index": str(2 + m + n + i)})
+    for k in range(len(derivatives)):  # the k-th declared derivative: ModelVariables' index 2 + m + n + k
+        ET.SubElement(derivative_list, "Unknown", {"index": str(2 + m + n + k)})
+        ET.SubElement(initial, "Unknown", {"index": str(2 + m + n + k)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 
@@ -262,9 +270,11 @@ def export_fmu(model: IdentifiedModel, path: str | os.PathLike, *, dt: float | N
 
     Variables: the model's inputs (causality input, start 0), its states as outputs (``initial="exact"``:
     set their start values to set the initial state), ``der(<state>)`` (the right-hand side, declared with the
-    ``derivative`` attribute so importers see the states), ``time``, and ``dt`` (a constant, linear) or
-    ``nsub`` (a parameter, nonlinear). The terms are written as C with :meth:`Term.to_c
-    <cosim.identify.terms.Term.to_c>` and the coefficients as double literals with ``repr`` precision. A state that
+    ``derivative`` attribute so importers see the states; not declared where a state or input already has
+    that name), ``time``, and ``dt`` (a constant, linear) or ``nsub`` (a parameter, nonlinear). Names are kept as
+    the model writes them (``mass.s``, ``x[2]``, ``'my var'``: flat naming); the generated C knows the signals by
+    position only. The terms are written as C with :meth:`Term.to_c <cosim.identify.terms.Term.to_c>` and the
+    coefficients as double literals with ``repr`` precision. A state that
     passes 1e12 in magnitude or turns non-finite makes ``doStep`` fail (as the model's simulation diverges).
     The sources (``model.h``, ``model.c``, ``fmi2.c``) are in the FMU's ``sources/``; they are compiled with the
     same compiler and flags as the bundled plant (:mod:`cosim.plant.build`).

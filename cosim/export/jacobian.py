@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InvalidSettingError
 from ..identify.model import IdentifiedModel
-from ..identify.terms import FUNCTIONS
+from ..identify.terms import FUNCTIONS, Term
 
 
 def _derivative_of(name: str, v: float) -> float:
@@ -89,7 +89,7 @@ def _jacobian(model: IdentifiedModel, x: np.ndarray, u: np.ndarray) -> tuple[np.
         if not np.any(model.coef[:, k]):
             continue
         try:
-            _, grad = _dual(ast.parse(text, mode="eval").body, values, index, len(names))
+            _, grad = _dual(Term(text)._tree.body, values, index, len(names))
         except (ValueError, ZeroDivisionError, OverflowError) as exc:
             raise InvalidSettingError(f"term {text!r} cannot be differentiated at the operating point ({exc}); "
                                       "choose another operating point") from None

@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -15,12 +15,13 @@ import numpy as np
 
 from ..files import atomic_output
 from ..identify.model import IdentifiedModel
-from .statespace import CONSTANT_INPUT, to_statespace
+from .statespace import CONSTANT_INPUT, label_name, to_statespace
 
 __all__ = ["export_mat"]
 
 
-def _cell(strings: Sequence[str]) -> np.ndarray:
+def _cell(strings: Iterable[str]) -> np.ndarray:
+    strings = list(strings)
     cell = np.empty((len(strings), 1), dtype=object)
     for i, s in enumerate(strings):
         cell[i, 0] = str(s)
@@ -35,7 +36,9 @@ def export_mat(model: IdentifiedModel, path: str | os.PathLike, *, dt: float | N
     char: ``ss(A, B, C, D, dt, 'StateName', StateName, 'InputName', InputName, 'OutputName', OutputName)``
     builds it in MATLAB; use ``ss(A, B, C, D)`` for dt = 0); ``x_op, u_op`` (the point the signals are
     deviations from); ``Equations`` (cell of char, the identified equations); ``ConstantInput`` (``'const'``
-    when the constant is an input held at 1, else empty); ``Notes`` (char).
+    when the constant is an input held at 1, else empty); ``Notes`` (char). The signal names are written as the
+    model writes them (``mass.s``, ``x[2]``): they are values in cells, and the file's own variable names are
+    only the fixed ones above, so any name fits.
 
     Parameters
     ----------
@@ -67,8 +70,8 @@ def export_mat(model: IdentifiedModel, path: str | os.PathLike, *, dt: float | N
         ("; hold the input 'const' at 1 (it carries the constant term)" if has_const else "")
     data = {
         "A": sys.A, "B": sys.B, "C": sys.C, "D": sys.D, "dt": float(sys.dt),
-        "StateName": _cell(sys.state_labels), "InputName": _cell(sys.input_labels),
-        "OutputName": _cell(sys.output_labels),
+        "StateName": _cell(map(label_name, sys.state_labels)), "InputName": _cell(map(label_name, sys.input_labels)),
+        "OutputName": _cell(map(label_name, sys.output_labels)),
         "x_op": sys.operating_point.x.reshape(-1, 1), "u_op": sys.operating_point.u.reshape(-1, 1),
         "Equations": _cell(model.equations(precision=10)),
         "ConstantInput": CONSTANT_INPUT if has_const else "",

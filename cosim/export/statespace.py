@@ -23,6 +23,12 @@ A model whose constant is zero gets nothing extra, whatever the mode.
 
 Inputs are held between samples (zero-order hold) everywhere, as in the rest of cosim.
 
+Signal names as FMUs write them
+-------------------------------
+States keep their names (``mass.s``). python-control refuses a ``.`` in an input or output name (it means
+``system.signal`` there), so their dots are written ``:`` (``mass:s``): :func:`control_label` gives a name's
+label and :func:`label_name` the name of a label (the controllers read the names back so).
+
 Examples
 --------
 >>> import numpy as np
@@ -44,11 +50,13 @@ import control
 import numpy as np
 from scipy.linalg import expm
 
+from ..data._names import control_label, label_name
 from ..errors import InvalidSettingError, UnknownVariableError
 from ..identify.model import IdentifiedModel
 from .jacobian import _jacobian
 
-__all__ = ["CONSTANT_INPUT", "CONSTANT_MODES", "OperatingPoint", "operating_point", "to_statespace"]
+__all__ = ["CONSTANT_INPUT", "CONSTANT_MODES", "OperatingPoint", "control_label", "label_name", "operating_point",
+           "to_statespace"]
 
 
 #: Name of the extra input that carries the constant term (``constant="input"``): hold it at 1.
@@ -289,6 +297,9 @@ def to_statespace(model: IdentifiedModel, *, dt: float | None = None, operating_
                   constant: str = "input", name: str | None = None) -> control.StateSpace:
     """The model as a python-control ``StateSpace`` with named signals; outputs = the states (C = I, D = 0).
 
+    The states keep the model's names; an input or output name's dots are written ``:`` (``mass.s`` ->
+    ``mass:s``, :func:`control_label`), as python-control refuses them there.
+
     Parameters
     ----------
     model : IdentifiedModel
@@ -343,7 +354,9 @@ def to_statespace(model: IdentifiedModel, *, dt: float | None = None, operating_
     b = b.reshape(n, len(inputs))
     if dt is not None:
         a, b = _zoh(a, b, _check_dt(dt))
-    options: dict[str, Any] = {"states": list(model.states), "inputs": inputs, "outputs": list(model.states)}
+    options: dict[str, Any] = {"states": [control_label(s, keep_dots=True) for s in model.states],
+                               "inputs": [control_label(u) for u in inputs],
+                               "outputs": [control_label(s) for s in model.states]}
     if name is not None:
         options["name"] = str(name)
     args = (a, b, np.eye(n), np.zeros((n, len(inputs))))

@@ -10,7 +10,9 @@ How a pair is found
 * **By the names** (``found="name"``): ``x``/``x_dot``, ``x``/``xdot``, ``x``/``dx``, ``x``/``x_d``,
   ``q``/``qd``, ``qm``/``qm_dot``, and a position prefix (``theta``, ``phi``, ``psi``, ``angle``, ``pos``,
   ``position``, ``x``, ``q``) swapped for a velocity prefix (``omega``, ``w``, ``vel``, ``velocity``, ``v``,
-  ``speed``) with the same rest: ``theta_m``/``omega_m``, ``pos``/``vel``, ``x1``/``v1``. A name pair is
+  ``speed``) with the same rest: ``theta_m``/``omega_m``, ``pos``/``vel``, ``x1``/``v1``; names as FMUs write
+  them: ``x``/``der(x)``, and the last part of a dotted name so (``shaft.phi``/``shaft.w``), or ``mass.s``/
+  ``mass.v`` (Modelica's translational position and velocity). A name pair is
   kept unless the data contradict it (they may be unable to tell: a position that barely moves); when they
   do (a velocity in other units, rpm for rad/s, or a signal that is not the derivative: gain off 1 by more
   than `tolerance` and three standard errors, or a residual three times the noise) it is dropped with an
@@ -120,7 +122,10 @@ def _velocity_names(position: str) -> list[str]:
                 continue
             out += [v + rest for v in _VELOCITY_PREFIXES]
             out += [pre + s + rest for s in _SUFFIXES] + ["d" + pre + rest]
-    return out
+    head, dot, last = position.rpartition(".")
+    if dot:  # a Modelica component's: mass.s/mass.v, shaft.phi/shaft.w, body.x/body.x_dot
+        out += [f"{head}.{v}" for v in [*_velocity_names(last), *(["v"] if last == "s" else [])]]
+    return [*out, f"der({position})"]
 
 
 def _name_pairs(names: Sequence[str]) -> list[tuple[str, str]]:

@@ -4,7 +4,9 @@
 One representation serves every stage: identification evaluates the terms on data (NumPy), simulation
 evaluates them on one state (plain floats, generated Python), the FMU export writes them as C, and a saved
 model stores them as text. Expressions are parsed with :mod:`ast` and only numbers, names, ``+ - * / **``
-and the functions in :data:`FUNCTIONS` are accepted; nothing is ever passed to ``eval`` unchecked.
+and the functions in :data:`FUNCTIONS` are accepted; nothing is ever passed to ``eval`` unchecked. Names may be
+written as FMUs write them (``sign(mass.v)*extForce``, ``der(x)``, ``A[1,2]``, ``'my var'``): they are parsed
+through their safe names (:func:`cosim.data._names.parse_expression`) and kept as written everywhere else.
 
 Examples
 --------
@@ -29,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..data._names import parse_expression
 from ..errors import InvalidSettingError, UnknownVariableError
 
 __all__ = ["Term", "FUNCTIONS", "polynomial_terms", "compile_rhs", "compile_rk4", "compile_rk4_casadi"]
@@ -90,7 +93,7 @@ class Term:
     def __post_init__(self) -> None:
         text = str(self.text).strip()
         try:
-            tree = ast.parse(text, mode="eval")
+            tree = parse_expression(text)
         except SyntaxError:
             raise InvalidSettingError(f"term {text!r} is not a valid expression; write e.g. omega_m*Tm or "
                                       "tanh(omega_m/0.01)") from None
