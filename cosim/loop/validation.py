@@ -222,7 +222,8 @@ def parse_scenario(text: str, *, parameters: Mapping[str, float] | None = None) 
                         " (e.g. step:amp=0.01,at=0.05,duration=2)")
     fields: dict[str, Any] = {}
     params = dict(parameters or {})
-    for item in filter(None, (p.strip() for p in rest.split(","))):
+    # commas inside brackets belong to a name (an FMI 3 array element: A[1,2]=0.5)
+    for item in filter(None, (p.strip() for p in re.split(r",(?![^\[]*\])", rest))):
         key, eq, value = item.partition("=")
         if not eq or not key.strip() or not value.strip():
             raise SpecError(f"scenario option {item!r} is not key=value (in {text!r})")
