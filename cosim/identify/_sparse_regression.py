@@ -6,6 +6,13 @@ fraction of the target its term explains and one threshold fits states of any un
 for ``"auto"``, the threshold of least BIC on the equation error along the threshold path (step 3 of the
 :mod:`cosim.identify.sindyc` docstring). With noise compensation the normal equations are bias-compensated
 first, and the directions whose signal is below their noise are dropped.
+
+With ``refine="output_error"`` and ``"auto"``, :mod:`cosim.identify.sindyc` asks for :data:`AUTO_IF_EXACT`:
+the threshold of least BIC when its model explains every regressed target to :data:`_EXACT` (a noise-free
+record: the equation error decides the structure, and output error only adjusts the coefficients), else the
+dense fit, which output error prunes (on noisy data equation error cannot judge small terms). Before, the dense
+fit was always refined: on noise-free records output error's Wald tests keep every term (their standard errors
+vanish with the noise), 2-12 spurious terms per system of ``benchmarks/bench_sindy_threshold.py``.
 """
 
 from __future__ import annotations
@@ -20,6 +27,15 @@ import numpy as np
 #: Residual RMS, relative to the target's RMS, below which the "auto" threshold treats a fit as exact.
 _BIC_FLOOR = 1e-6
 _MAX_CANDIDATES = 40
+#: The equation-error threshold of an "auto" fit refined by output error: the threshold of least BIC when its
+#: model leaves a residual RMS of at most :data:`_EXACT` of every regressed target (the record decides the
+#: structure), else 0 (the dense fit, pruned by output error: equation error cannot judge small terms on noisy
+#: data).
+AUTO_IF_EXACT = "auto-if-exact"
+#: Residual RMS, relative to the target's RMS, up to which the equation error decides the structure. Noise-free
+#: records leave 1e-15 (forward-Euler samples, left rectangle) to 3.5e-7 (Van der Pol at mu = 5, dt = 0.01 s,
+#: trapezoid with end correction); 0.5 % of noise leaves 7e-3 or more (``benchmarks/bench_sindy_threshold.py``).
+_EXACT = 1e-4
 #: Noise compensation keeps a direction of the normal equations if its signal exceeds this multiple of its noise.
 _NOISE_MARGIN = 1.0
 
@@ -43,7 +59,8 @@ def _sparse_fit(features: np.ndarray, targets: np.ndarray, rows: list[int], n_ef
                 noise_var: np.ndarray | None, threshold: float | str, ridge: float) -> _SparseFit:
     """Regress the targets of `rows` on the features, scaled by their RMS values (no rows: nothing regressed).
 
-    `noise_var` is the noise variance of each feature column (noise compensation) or None.
+    `noise_var` is the noise variance of each feature column (noise compensation) or None; `threshold` a
+    number, ``"auto"`` or :data:`AUTO_IF_EXACT` (module docstring).
     """
     feat_scale = np.sqrt(np.mean(features ** 2, axis=0))
     usable = feat_scale > 0
@@ -55,12 +72,18 @@ def _sparse_fit(features: np.ndarray, targets: np.ndarray, rows: list[int], n_ef
         theta_s = features[:, usable] / feat_scale[usable]
         y_s = targets[:, rows] / targ_scale[rows]
         noise_s = None if noise_var is None else noise_var[usable] * len(features) / feat_scale[usable] ** 2
-        xi, value, meta = _sparse(theta_s, y_s, n_eff, noise_s, threshold, ridge)
+        xi, value, meta = _sparse(theta_s, y_s, n_eff, noise_s, "auto" if threshold == AUTO_IF_EXACT else threshold,
+                                  ridge)
+        residual_rms = np.sqrt(np.mean((y_s - theta_s @ xi.T) ** 2, axis=0)).tolist()
+        if threshold == AUTO_IF_EXACT:
+            exact = max(residual_rms) <= _EXACT
+            if not exact:  # noisy, or not in the library: the dense fit, for output error to prune
+                xi, value, meta = _sparse(theta_s, y_s, n_eff, noise_s, 0.0, ridge)
+                residual_rms = np.sqrt(np.mean((y_s - theta_s @ xi.T) ** 2, axis=0)).tolist()
+            meta = {**meta, "rule": AUTO_IF_EXACT, "exact": _EXACT, "decided_by_equation_error": bool(exact)}
         coef[:, usable] = xi * targ_scale[rows, None] / feat_scale[usable]
-        residual = y_s - theta_s @ xi.T
-        residual_rms = np.sqrt(np.mean(residual ** 2, axis=0)).tolist()
     else:
-        value = 0.0 if threshold == "auto" else float(threshold)
+        value = 0.0 if threshold in ("auto", AUTO_IF_EXACT) else float(threshold)
         meta = {"method": "none: every row is a fixed kinematic row", "value": value}
     coef_scale = np.ones((targets.shape[1], features.shape[1]))
     coef_scale[:, usable] = feat_scale[usable][None, :] / targ_scale[:, None]

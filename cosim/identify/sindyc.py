@@ -21,9 +21,9 @@ The steps of a fit
      interval's trapezoid gets its end correction ``-dt^2/12 * (g'(t_k+1 -) - g'(t_k +))``, the derivative of
      each term taken along the fitted model's own vector field with the input held (two fixed-point passes),
      which makes the quadrature O(dt^4) for any input pattern instead of O(dt^2). On the two-mass servo at
-     2257 Hz (resonance 17.8 Hz, omega*dt = 0.05, a 4 rad initial twist whose spring torques are 10^4 times
-     the input torque) that is the difference between 2e-4 and 3e-8 relative coefficient error; a central
-     finite difference gets the input coefficient wrong by percents there. Integration also averages the
+     2257 Hz (resonance 17.8 Hz, omega*dt = 0.05, a 4 rad initial twist) that is 2e-4 against 3e-8 relative
+     coefficient error. Samples of a fixed-step forward Euler (co-simulation FMUs) take the left rectangle,
+     exact there, when it fits better (:mod:`cosim.identify._sampler`). Integration also averages the
      noise a derivative would amplify. With ``noise_compensation`` (default) the estimated white-noise
      variance of the states is removed from the normal equations (bias-compensated least squares) and the
      directions whose signal is below their noise are dropped (minimum-norm coefficients there).
@@ -53,16 +53,15 @@ The steps of a fit
      coefficients, ``N_eff`` the number of independent equations (samples / window for ``"integral"``,
      whose windows overlap) and ``floor = 1e-6`` of the target's RMS (below that the residual is the data's
      numerical noise, so noise-free data does not reward spurious terms). Ties go to the sparser model.
-   * with ``refine="output_error"``, equation error cannot judge small terms on noisy data (at 10 % noise
-     the servo's damping and input terms are below the equation error's noise), so the dense equation-error
-     fit is refined by output error and then pruned by backward elimination with Wald tests: the
-     coefficient with the smallest ``|coef| / standard error`` (covariance from the output-error Jacobian)
-     goes while that t-statistic is below ``sqrt(log(n))`` (the output error's BIC drops), the others
-     updated as the constrained fit; then the reduced model is refined again (see
-     :func:`cosim.identify._refinement._prune`). BIC removes what the record cannot pin down: on a weakly
-     exciting record (the 5 Hz sine, a short record, 50 % noise) that can be the input or a damping term of
-     the two-mass servo. Give ``threshold=0`` to keep the whole library (as
-     :func:`~cosim.study.cases.study_case` does, like the study's X, U library).
+   * with ``refine="output_error"``, equation error cannot judge small terms on noisy data (at 10 % noise the
+     servo's damping and input terms are below the equation error's noise), so the dense equation-error fit (the
+     BIC one if it leaves <= 1e-4 of each target: noise-free data decide the structure there) is refined by output
+     error and then pruned by backward elimination with Wald tests: the coefficient with the smallest |coef| /
+     standard error (output-error Jacobian) goes while that t-statistic is below ``sqrt(log(n))`` (the output
+     error's BIC drops), the others updated as the constrained fit; then the reduced model is refined again (see
+     :func:`cosim.identify._refinement._prune`). BIC removes what the record cannot pin down: on a weakly exciting
+     record (the 5 Hz sine, a short record, 50 % noise) that can be the input or a damping term of the servo.
+     ``threshold=0`` keeps the whole library (as :func:`~cosim.study.cases.study_case` does, the study's X, U).
 
    The choice, the candidates and their scores are recorded in ``model_.meta["threshold"]``.
 4. **Kinematics** (default ``kinematics="auto"``): rows such as ``d theta_m/dt = omega_m`` are fixed
@@ -130,12 +129,13 @@ from threadpoolctl import threadpool_limits
 from ..data.trajectory import Trajectory
 from ..errors import DataError, IdentificationWarning, InvalidSettingError
 from ._differentiation import _derive_velocity
-from ._equation_error import _equations, _window
+from ._equation_error import _window
 from ._library import _kinematic_rows, _library_terms
 from ._records import _known_initial_states, _measured, _prepare, _stacked, _warn_constant_inputs
 from ._refinement import _analysis_runs, _refine_decimated, _starts
+from ._sampler import _equations
 from ._settings import _DEFAULTS, DIFFERENTIATION_METHODS, _check_mapping, _check_settings, _kinematics_setting
-from ._sparse_regression import _sparse_fit
+from ._sparse_regression import AUTO_IF_EXACT, _sparse_fit
 from ._stability import _stability, _unstable
 from .kinematics import _find_kinematics
 from .model import IdentifiedModel, SimulationResult
@@ -377,7 +377,7 @@ class SINDYc:
         coef = np.zeros((len(state_names), n_terms))
         for pos, vel in kin.items():
             coef[state_names.index(pos), library.index(vel)] = 1.0
-        ee_threshold = 0.0 if (self.threshold == "auto" and self.refine) else self.threshold
+        ee_threshold = AUTO_IF_EXACT if (self.threshold == "auto" and self.refine) else self.threshold
         sparse = _sparse_fit(features, targets, free_rows, n_eff, noise_var, ee_threshold, self.ridge)
         coef[free_rows] = sparse.coef
         threshold = sparse.threshold
