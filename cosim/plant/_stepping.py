@@ -131,6 +131,24 @@ class _Stepping:
             counter[0] = k + 1
             return y_view.copy()
 
+        if not n_in:  # a plant without inputs (an autonomous model): nothing to set, the step is only doStep
+
+            def step(u: Sequence[float]) -> np.ndarray:  # noqa: F811 - the same step, without the inputs
+                if u:
+                    bad_input(u)
+                k = counter[0]
+                t = t0 + k * dt
+                t_c.value = t
+                h_c.value = (t0 + (k + 1) * dt) - t
+                status = do_step(*step_args)
+                if status > 1 or (terminated is not None and terminated.value):
+                    ended(status, t)
+                status = get_real(*get_args)
+                if status > 1:
+                    fail(names[2], status, t + dt)
+                counter[0] = k + 1
+                return y_view.copy()
+
         def read() -> int:
             return get_real(*get_args)
 
