@@ -21,10 +21,13 @@ from cosim import build_fmu
 #: CI): they are handed out longest first, so that the last file to start is a short one. Only the order depends
 #: on these figures.
 FILE_SECONDS = {"test_diagnose_benchmark_cases.py": 114, "test_diagnosis.py": 70,
-                "test_diagnosis_generalization.py": 63, "test_emps.py": 43, "test_readme_tour.py": 31,
+                "test_diagnosis_generalization.py": 35, "test_emps.py": 43, "test_readme_tour.py": 31,
                 "test_identify_multistart.py": 25, "test_diagnose_record_rate.py": 21,
                 "test_diagnosis_uncovered.py": 21, "test_kinematics.py": 16, "test_derive_window.py": 14,
-                "test_demo.py": 13, "test_identification.py": 12, "test_pid.py": 12}
+                "test_demo.py": 13, "test_identification.py": 12, "test_pid.py": 12,
+                # builds the Reference FMUs (cmake, 15-20 s) while the other worker runs a long file, so that
+                # test_reference_fmus.py finds them built instead of waiting on the build's lock
+                "test_model_exchange.py": 20}
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

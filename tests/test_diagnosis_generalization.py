@@ -1,6 +1,6 @@
-"""A 20-record slice of the diagnosis generalisation benchmark, against the issue's thresholds.
+"""A 10-record slice of the diagnosis generalisation benchmark, against the issue's thresholds.
 
-Records 0-19 of benchmarks/independent_plants.py (an independent scipy simulator), shortened to at most
+Records 0-9 of benchmarks/independent_plants.py (an independent scipy simulator), shortened to at most
 1000 samples (4-5 s at 200-240 Hz; CI time), run through the default command lines as subprocesses, path (a)
 ``cosim diagnose DATA ...`` and path (b) ``cosim identify`` then ``cosim diagnose --model``, and scored as
 benchmarks/bench_diagnosis_generalization.py scores them: named right first >= 90 %, false claims <= 5 %,
@@ -17,7 +17,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # benchmarks/ is not a package
 import bench_diagnosis_generalization as bench  # noqa: E402
 
-RECORDS = list(range(20))
+RECORDS = list(range(10))  # 20 until issue 15 needed the CI time: the full benchmark is in benchmarks/
 MAX_SAMPLES = 1000
 
 

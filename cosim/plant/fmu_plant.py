@@ -60,12 +60,12 @@ _log = logging.getLogger("cosim.fmu")
 
 
 class FmuPlant(_Stepping):
-    """A co-simulation FMU driven at a fixed communication step.
+    """An FMU driven at a fixed communication step: co-simulation, or Model Exchange integrated by FMPy's solvers.
 
     Parameters
     ----------
     fmu : path-like
-        The ``.fmu`` file (FMI 2.0 or 3.0, co-simulation, with a binary for this platform).
+        The ``.fmu`` file (FMI 2.0 or 3.0, co-simulation or Model Exchange, with a binary for this platform).
     dt : float, optional
         Communication step size in seconds. Defaults to the FMU's DefaultExperiment stepSize.
     parameters : mapping, optional
@@ -82,10 +82,21 @@ class FmuPlant(_Stepping):
         order. `outputs` may also name states and local variables, or be ``"all"``.
     instance_name : str
         Name of the FMU instance (appears in the FMU's log messages).
+    kind : {"cs", "me"}, optional
+        The interface: co-simulation (the FMU integrates itself) or Model Exchange (integrated here by FMPy's
+        solvers, :class:`~cosim.plant.model_exchange.ModelExchangeSlave`, with time, state and step events).
+        Default: co-simulation when the FMU has it, else Model Exchange. Read back as :attr:`kind`.
+    solver : {"cvode", "euler"}
+        Model Exchange only: FMPy's CVode, or forward Euler at the DefaultExperiment stepSize (else `dt`).
+    relative_tolerance : float, optional
+        Model Exchange with CVode: its relative tolerance (default: the DefaultExperiment's, else 1e-5).
 
     Notes
     -----
     The instance always terminates and frees itself in :meth:`close`, called by ``with`` also on error.
+    An FMU that ends the simulation itself (Stair at 9 s) makes :meth:`step` raise
+    :class:`~cosim.errors.SimulationTerminated` with the time, its message and the outputs then;
+    :func:`cosim.simulate` keeps the record up to that time.
     The FMU's log messages go to the Python logger ``cosim.fmu``; the last ones are attached to the
     error when an FMI call fails.
 
