@@ -7,8 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..numbers import parse_number
-from ._command import _emit, _friendly, _pairs, _ranges, _resolve_fmu
+from ._command import _emit, _friendly, _ranges, _resolve_fmu, _settings
 
 __all__ = ["validate_command"]
 
@@ -43,6 +42,9 @@ __all__ = ["validate_command"]
 @click.option("--scheduler", default=None, metavar="ADDRESS", help="Dask scheduler for the Monte Carlo.")
 @click.option("--workers", type=click.IntRange(1, None), default=None, help="Local worker processes.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the Monte Carlo draws.")
+@click.option("--kind", type=click.Choice(["cs", "me"]), default=None,
+              help="The FMU's interface: cs (co-simulation) or me (Model Exchange, integrated by FMPy's CVode). "
+                   "Default: cs when the FMU has it, else me.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress bars on stderr (default: only when stderr is a terminal).")
 @click.option("--json", "as_json", is_flag=True,
@@ -51,8 +53,8 @@ __all__ = ["validate_command"]
 def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, ...], sets: tuple[str, ...],
                      specs: tuple[str, ...], report_path: str | None, plots_dir: str | None, no_model: bool,
                      samples: int, spread: float, effects: tuple[str, ...], min_pass_rate: float,
-                     scheduler: str | None, workers: int | None, seed: int, progress: bool | None,
-                     as_json: bool) -> None:
+                     scheduler: str | None, workers: int | None, seed: int, kind: str | None,
+                     progress: bool | None, as_json: bool) -> None:
     """Run a controller against an FMU in closed loop and check specs; exit 1 when one fails.
 
     With --robustness N it also validates on N plants drawn around the nominal one (inertias, stiffness and
@@ -78,16 +80,16 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
 
         raise FmuNotFoundError(f"FMU not found: {fmu}; build the bundled one with `cosim fmu build` or pass bundled")
     controller = load_controller(controller_path)
-    parameters = {k: parse_number(v, what=f"--set {k}") for k, v in _pairs(sets, "--set").items()}
+    parameters = _settings(sets, "--set")
     verdict = validate(fmu, controller, scenario_list, spec_list, parameters=parameters or None,
-                       model=None if no_model else "design", progress=progress)
+                       model=None if no_model else "design", progress=progress, kind=kind)
     rob = None
     if samples:
         from ..study.robustness import robustness
 
         rob = robustness(fmu, controller, [s.with_effects(**parameters) for s in scenario_list], spec_list,
                          samples=samples, spread=spread, effects=_ranges(effects, "--effect"), seed=seed,
-                         scheduler=scheduler, workers=workers, progress=progress)
+                         scheduler=scheduler, workers=workers, progress=progress, kind=kind)
     payload = verdict.to_dict()
     files: dict[str, str] = {}
     if report_path or plots_dir:

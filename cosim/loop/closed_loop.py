@@ -336,7 +336,7 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
                 measurement_noise: Mapping[str, float] | None = None, seed: int = 0,
                 on_controller_error: str = "stop", t_event: float | None = None, band: float = 0.02,
                 band_abs: float | None = None, band_peak: float | None = None,
-                progress: bool | None = None) -> ClosedLoopResult:
+                progress: bool | None = None, kind: str | None = None) -> ClosedLoopResult:
     """Run `controller` against the plant FMU at the controller's sample time, and against a model.
 
     Parameters
@@ -367,6 +367,8 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
         Passed to :func:`cosim.loop.response.response_metrics` (event time, settling band).
     progress : bool or None
         Progress bar (None: only for long runs on a terminal).
+    kind : {"cs", "me"}, optional
+        The interface of an FMU opened here (see :class:`~cosim.plant.fmu_plant.FmuPlant`).
 
     Returns
     -------
@@ -379,7 +381,7 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
         raise InvalidSettingError(f"duration must be a positive number of seconds, got {duration!r}")
     n = max(1, int(round(duration / dt)))
     own = not isinstance(plant, FmuPlant)
-    fmu = FmuPlant(plant, dt=dt, parameters=parameters, start=start) if own else plant
+    fmu = FmuPlant(plant, dt=dt, parameters=parameters, start=start, kind=kind) if own else plant
     try:
         if not own:
             if not math.isclose(fmu.dt, dt, rel_tol=1e-9):

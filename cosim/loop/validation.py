@@ -404,7 +404,7 @@ def _as_scenarios(scenarios: Scenario | str | Iterable[Scenario | str]) -> list[
 
 def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Scenario | str],
              specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, parameters: Mapping[str, float] | None = None,
-             model: Any = "design", progress: bool | None = None) -> Verdict:
+             model: Any = "design", progress: bool | None = None, kind: str | None = None) -> Verdict:
     """Run `controller` against the FMU in every scenario and check every spec.
 
     Parameters
@@ -420,6 +420,8 @@ def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Sce
         FMU parameters for every scenario (a scenario's own win), e.g. ``{"Fc": 100.0}``.
     model : "design", None or a model
         Also run the controller against this model (see :func:`cosim.loop.closed_loop.closed_loop`).
+    kind : {"cs", "me"}, optional
+        The FMU's interface, when `fmu` is a path (default: co-simulation if it has one, else Model Exchange).
 
     Returns
     -------
@@ -446,7 +448,7 @@ def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Sce
                              disturbance=disturbance, parameters=params or None,
                              start=scenario.start or None, model=model, t_event=scenario.at,
                              band=scenario.band, band_peak=0.1 if scenario.kind == "disturbance" else None,
-                             progress=progress)
+                             progress=progress, kind=kind)
         results.append(result)
         if result.status != "completed":
             stop = next((e for e in reversed(result.events) if e["kind"] in ("controller_error", "plant_error")), None)

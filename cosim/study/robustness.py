@@ -109,7 +109,7 @@ def _ratio(op: str, value: float | None, limit: float) -> float:
 
 
 def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[str, Any]], specs: list[str],
-                    parameters: dict[str, float]) -> dict[str, Any]:
+                    parameters: dict[str, float], kind: str | None = None) -> dict[str, Any]:
     """One Monte Carlo sample (runs in a worker): validate with `parameters`, return pass, reasons, figures."""
     from controllers.base import controller_from_json
 
@@ -117,7 +117,7 @@ def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[s
     # the drawn plant wins over a scenario's own parameters; the scenario keeps its name (the table's columns)
     runs = [replace(Scenario.from_dict(s), parameters={**s.get("parameters", {}), **parameters}, name=s["name"])
             for s in scenarios]
-    verdict = validate(fmu, ctrl, runs, specs, model=None, progress=False)
+    verdict = validate(fmu, ctrl, runs, specs, model=None, progress=False, kind=kind)
     metrics: dict[str, Any] = {}
     for check in verdict.checks:
         prefix = f"{check['scenario']}|" if len(runs) > 1 else ""
@@ -147,7 +147,8 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
                specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, samples: int = 50, spread: float = 0.2,
                uncertain: Sequence[str] = DEFAULT_UNCERTAIN,
                effects: Mapping[str, tuple[float, float]] | None = None, seed: int = 0,
-               scheduler: Any = None, workers: int | None = None, progress: bool | None = None) -> RobustnessResult:
+               scheduler: Any = None, workers: int | None = None, progress: bool | None = None,
+               kind: str | None = None) -> RobustnessResult:
     """Validate `controller` on `samples` plants drawn around the nominal one; pass rate and worst case.
 
     Parameters
@@ -173,6 +174,8 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
     progress : bool or None, default None
         Progress bar on stderr, one step per sample: None shows it only when stderr is a terminal, True
         shows it anyway, False hides it.
+    kind : {"cs", "me"}, optional
+        The FMU's interface (see :class:`~cosim.plant.fmu_plant.FmuPlant`).
 
     Returns
     -------
@@ -201,7 +204,7 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
         draws.append(params)
     payload = controller.to_dict()
     cases = [{"fmu": fmu, "controller": payload, "scenarios": [s.to_dict() for s in scenario_list],
-              "specs": spec_texts, "parameters": params} for params in draws]
+              "specs": spec_texts, "parameters": params, **({"kind": kind} if kind else {})} for params in draws]
     sweep = run_sweep(robustness_case, cases, scheduler=scheduler, workers=workers, progress=progress,
                       desc="robustness")
     rows = []
