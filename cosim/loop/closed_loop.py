@@ -45,7 +45,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..data.trajectory import Trajectory
-from ..errors import ControllerError, CosimError, InvalidSettingError, UnknownVariableError
+from ..errors import ControllerError, CosimError, InvalidSettingError, SimulationTerminated, UnknownVariableError
 from ..plant.fmu_plant import FmuPlant
 from .response import jsonable_metrics, response_metrics
 
@@ -315,6 +315,9 @@ def _run(controller: Any, plant: Any, *, n: int, t0: float, dt: float, refs: np.
             last_u = row[ctrl_idx].copy()
             try:
                 Y[k + 1] = step(row)
+            except SimulationTerminated as exc:  # the FMU ended the run itself: not a failure, the loop stops
+                stops.append({"time": exc.time, "kind": "terminated", "message": f"{exc}; the loop stopped"})
+                break
             except CosimError as exc:
                 stops.append({"time": t, "kind": "plant_error",
                               "message": f"the plant failed at t={t:.6g} s: {exc}; the loop stopped"})

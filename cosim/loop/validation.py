@@ -402,6 +402,10 @@ def _as_scenarios(scenarios: Scenario | str | Iterable[Scenario | str]) -> list[
     return [s if isinstance(s, Scenario) else parse_scenario(s) for s in items]
 
 
+#: The closed-loop events that end a run early: the controller failed, the plant failed, the FMU ended the run.
+_STOPS = ("controller_error", "plant_error", "terminated")
+
+
 def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Scenario | str],
              specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, parameters: Mapping[str, float] | None = None,
              model: Any = "design", progress: bool | None = None, kind: str | None = None) -> Verdict:
@@ -451,10 +455,10 @@ def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Sce
                              progress=progress, kind=kind)
         results.append(result)
         if result.status != "completed":
-            stop = next((e for e in reversed(result.events) if e["kind"] in ("controller_error", "plant_error")), None)
+            stop = next((e for e in reversed(result.events) if e["kind"] in _STOPS), None)
             reasons.append(f"[{scenario.name}] the loop stopped early: {stop['message'] if stop else 'unknown'}")
         for event in result.events:
-            if event["kind"] not in ("controller_error", "plant_error"):
+            if event["kind"] not in _STOPS:
                 notes.append(f"[{scenario.name}] t={event['time']:.6g} s {event['kind']}: {event['message']}")
         notes += [f"[{scenario.name}] {note}" for note in result.notes]
         for spec in spec_list:
