@@ -13,6 +13,7 @@ the system's, else the ``cmake`` PyPI package's (a test dependency).
 from __future__ import annotations
 
 import fcntl
+import functools
 import hashlib
 import os
 import shutil
@@ -49,6 +50,7 @@ def _source_hash() -> str:
     return digest.hexdigest()[:12]
 
 
+@functools.cache  # once per process: the tests ask for the set once each
 def reference_fmus(fmi_version: int, *, optimized: bool = False) -> dict[str, Path]:
     """Name -> path of the Reference FMUs of `fmi_version` (2 or 3), built once and cached (`optimized`: the
     Release build, as the README of ../shared/fmus builds them; else -O0, quicker to compile)."""
