@@ -5,10 +5,13 @@
 * :mod:`~cosim.plant.toolchain` - the C compiler, platform names and zip files every compiled artefact uses
   (the bundled FMU, an exported model FMU, the MPC's generated step);
 * :mod:`~cosim.plant.model_description` - :func:`open_model_description`: an FMU file checked (a zip, FMI 2.0
-  or 3.0, co-simulation, a binary for this platform) and its modelDescription.xml read;
-* :mod:`~cosim.plant.fmu_plant` - :class:`FmuPlant`, one FMI 2.0/3.0 co-simulation FMU stepped at a fixed
-  sample time (its values set and read by type in :mod:`~cosim.plant._fmi_calls`, its FMI 2.0 messages
-  logged through :mod:`~cosim.plant._fmi_callbacks`).
+  or 3.0, co-simulation or Model Exchange, a binary for this platform) and its modelDescription.xml read;
+* :mod:`~cosim.plant.fmu_plant` - :class:`FmuPlant`, one FMI 2.0/3.0 FMU stepped at a fixed sample time
+  (signals of every numeric type and FMI 3 array elements named in :mod:`~cosim.plant._variables`, the step in
+  :mod:`~cosim.plant._stepping`, values set and read by type in :mod:`~cosim.plant._fmi_calls`, FMI 2.0
+  messages logged through :mod:`~cosim.plant._fmi_callbacks`);
+* :mod:`~cosim.plant.model_exchange` - :class:`~cosim.plant.model_exchange.ModelExchangeSlave`, a Model
+  Exchange FMU integrated by FMPy's CVode or Euler behind a co-simulation slave's calls.
 
 The lowest room: it imports only the foundation (:mod:`cosim.errors`, :mod:`cosim.files`).
 """

@@ -1,9 +1,12 @@
-"""A co-simulation FMU as a plant: `FmuPlant`, stepped from Python at full speed.
+"""An FMU as a plant: `FmuPlant`, stepped from Python at full speed.
 
-`FmuPlant` wraps any FMI 2.0 or 3.0 co-simulation FMU (the bundled two-mass servo, or one exported by
-OpenModelica, Dymola, Simulink, pythonfmu...). It reads the FMU's modelDescription.xml to discover inputs,
-outputs and parameters, instantiates the FMU with FMPy, and then drives it through ctypes function pointers
-bound once, so that :meth:`FmuPlant.step` costs three FMI calls and nothing else.
+`FmuPlant` wraps any FMI 2.0 or 3.0 FMU (the bundled two-mass servo, or one exported by OpenModelica, Dymola,
+Simulink, pythonfmu...): co-simulation, or Model Exchange integrated by FMPy's CVode or Euler
+(:mod:`cosim.plant.model_exchange`, ``kind="me"``). It reads the FMU's modelDescription.xml to discover inputs,
+outputs and parameters, of every numeric type and FMI 3 arrays element by element (:mod:`cosim.plant._variables`),
+instantiates the FMU with FMPy, and then drives a co-simulation FMU's 64-bit float signals through ctypes
+function pointers bound once (:mod:`cosim.plant._stepping`), so that :meth:`FmuPlant.step` costs three FMI calls
+and nothing else.
 
 Why not FMPy's ``FMU2Slave.setReal/doStep/getReal`` in the loop: each of those builds new ctypes arrays and
 goes through a generic wrapper on every call, which costs more than the model itself for small plants. FMPy
