@@ -9,8 +9,9 @@
 
 The steps of a :class:`SINDYc` fit live in private modules, each named for its job: ``_settings`` (checks of
 the settings), ``_records`` (records read into arrays), ``_library`` (library terms, kinematic rows),
-``_differentiation`` (pysindy differentiators), ``_equation_error`` (features and targets),
-``_sparse_regression`` (scale-aware STLSQ, threshold by BIC), ``_refinement`` (output-error refinement and
+``_differentiation`` (pysindy differentiators), ``_equation_error`` (features and targets), ``_sampler`` (the
+trapezoid or, for forward-Euler samples, the left rectangle), ``_sparse_regression`` (scale-aware STLSQ,
+threshold by BIC), ``_refinement`` (output-error refinement and
 backward elimination), ``_stability`` (stability judgement).
 
 Imports the data and plant rooms and the foundation.

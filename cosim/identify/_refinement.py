@@ -387,7 +387,8 @@ def _prune(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]]
         for j, t_value, _ in step:
             i, k = index[j]
             removed.append({"state": model.states[i], "term": model.terms[k], "t": t_value})
-    meta["threshold"] = {"method": "auto with refinement: dense equation-error fit, refined by output error, "
+    meta["threshold"] = {"method": "auto with refinement: the equation-error fit (dense, or its BIC structure when "
+                                   "that is exact), refined by output error, "
                                    "then backward elimination (Wald) of coefficients with |coef|/std_error "
                                    "below sqrt(log(n)), n the number of residuals, kept when the output "
                                    "error's BIC drops",
