@@ -43,14 +43,17 @@ def stable_record() -> Trajectory:
                                   roles={"x": "state", "x_dot": "state", "u": "input"})
 
 
-def test_unstable_model_raises_with_eigenvalues_and_what_to_try():
+@pytest.mark.parametrize("refine", [None, "output_error"])
+def test_unstable_model_raises_with_eigenvalues_and_what_to_try(refine):
     with pytest.raises(UnstableModelError) as info:
-        SINDYc().fit(unstable_record())
+        SINDYc(refine=refine).fit(unstable_record())
     err = info.value
     assert isinstance(err, CosimError) and isinstance(err, ValueError)
     message = str(err)
     assert "\n" not in message and "largest real parts 0.79" in message  # 0.8 up to the held-input reading
-    assert "allow_unstable=True" in message and "refine='output_error'" in message and "kinematics" in message
+    assert "allow_unstable=True" in message and "kinematics" in message
+    # refinement is suggested only where it was off (the default has it on, as the CLI)
+    assert ("refine='output_error'" in message) == (refine is None)
     assert err.eigenvalues[0].real == pytest.approx(0.8, rel=1e-2)
     assert err.model is not None and err.model.meta["stable"] is False
 

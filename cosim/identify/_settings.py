@@ -138,5 +138,5 @@ def _check_settings(est: Any) -> None:
 _DEFAULTS = {"library": "linear", "degree": 2, "terms": [], "include_constant": True, "threshold": "auto",
              "ridge": 0.0, "differentiation": "integral", "differentiation_options": {}, "noise_compensation": True,
              "kinematics": "auto", "velocities": {}, "velocity_method": "auto", "velocity_options": {},
-             "derive_window": None, "refine": None, "refine_initial_state": True, "refine_options": {},
+             "derive_window": None, "refine": "output_error", "refine_initial_state": True, "refine_options": {},
              "allow_unstable": False, "decimate": "auto", "prefer_stable": None}

@@ -276,6 +276,27 @@ class IdentifiedModel:
         phi = expm(big * dt)
         return phi[:n, :n], phi[:n, n:n + m], phi[:n, -1]
 
+    def to_statespace(self, **options: Any) -> Any:
+        """The model as a python-control ``StateSpace``: :func:`cosim.export.to_statespace` of this model.
+
+        Parameters
+        ----------
+        **options
+            Options of :func:`cosim.export.to_statespace`: ``dt`` (the ZOH-discrete system), ``operating_point``
+            (required for a nonlinear model), ``constant``, ``name``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> model = IdentifiedModel(states=("x",), inputs=("u",), terms=("x", "u"), coef=np.array([[-2.0, 1.0]]))
+        >>> sys = model.to_statespace()
+        >>> sys.A.tolist(), sys.B.tolist(), sys.input_labels
+        ([[-2.0]], [[1.0]], ['u'])
+        """
+        from .. import export  # the export room sits above this one: imported when called, as SINDYc does
+
+        return export.to_statespace(self, **options)
+
     def _simulate_linear(self, x: np.ndarray, u: np.ndarray, dt: float) -> tuple[str, int]:
         ad, bd, cd = self.discretize(dt)
         if u.shape[0] >= _JIT_MIN_STEPS:  # a long record: the same arithmetic, compiled (terms.compile_linear_run)

@@ -69,9 +69,8 @@ The steps of a fit
    :func:`~cosim.identify.kinematics.detect_kinematics`: name pairs (``theta_m``/``omega_m``, ``x``/``x_dot``)
    the data do not contradict, and pairs the data show (a state equal to the running integral of another);
    a mapping ``{"theta_m": "omega_m"}`` gives them, ``None`` or ``"none"`` fixes none. What was used is in
-   ``kinematics_`` and ``model_.meta["kinematics"]`` (position -> velocity) and
-   ``model_.meta["kinematics_found"]`` (each pair with how it was found, gain and R²).
-5. **Output-error refinement** (``refine="output_error"``): starting from the equation-error fit, the
+   ``kinematics_``, ``model_.meta["kinematics"]`` (position -> velocity) and ``["kinematics_found"]`` (how).
+5. **Output-error refinement** (``refine="output_error"``, the default): starting from the equation-error fit, the
    non-zero coefficients (sparsity pattern kept; fixed kinematic rows stay fixed) and each record's initial
    state are fitted to minimise the free-run simulation error, see :mod:`cosim.identify.output_error` (exact ZOH
    simulation and exact Jacobian for linear models, horizon continuation). This removes the bias equation
@@ -202,8 +201,9 @@ class SINDYc:
         ``{"window_length": 7, "polyorder": 3}``).
     derive_window : int, optional
         Window of the ``"auto"`` derivative in samples (odd, >= 5) instead of the one chosen from the data.
-    refine : {None, "output_error"}
-        Refine the equation-error fit by output error (:mod:`cosim.identify.output_error`).
+    refine : {"output_error", None}
+        Refine the equation-error fit by output error (:mod:`cosim.identify.output_error`; default, as ``cosim
+        identify``); None keeps the equation-error fit (faster, biased on noisy states; ``--no-refine``).
     refine_initial_state : bool
         With refinement, also estimate each record's initial state (recorded in ``meta["x0"]``).
     refine_options : mapping, optional
@@ -259,7 +259,7 @@ class SINDYc:
                  noise_compensation: bool = True, kinematics: Mapping[str, str] | str | None = "auto",
                  velocities: Mapping[str, str] | None = None, velocity_method: str = "auto",
                  velocity_options: Mapping[str, Any] | None = None, derive_window: int | None = None,
-                 refine: str | None = None, refine_initial_state: bool = True,
+                 refine: str | None = "output_error", refine_initial_state: bool = True,
                  refine_options: Mapping[str, Any] | None = None, allow_unstable: bool = False,
                  decimate: int | str = "auto", prefer_stable: bool | None = None) -> None:
         self.library = library
