@@ -37,7 +37,7 @@ def best_of(repeat: int, func) -> float:
 
 
 def time_one_size(fmu: Path, n: int, repeat: int, refine_max: int) -> dict:
-    traj = simulate(fmu, {"Tm": "square:amp=0.1,freq=1"}, duration=n * STUDY_DT, dt=STUDY_DT,
+    traj = simulate(fmu, {"Tm": "square:amp=500,freq=1"}, duration=n * STUDY_DT, dt=STUDY_DT,
                     start=STUDY_X0).with_noise(0.05, seed=0)
     x, u = traj[list(STATES)], traj[["Tm"]]
 

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for step in (("simulate", "bundled", "--input", "Tm=square:amp=0.1,freq=2", "--duration", "4", "--dt",
+        for step in (("simulate", "bundled", "--input", "Tm=square:amp=500,freq=2", "--duration", "4", "--dt",
                       "1/2257", "--set", "Fc=0.3", "--noise", "0.1", "--seed", "0", "-o", "data.csv"),
                      ("identify", "data.csv", "--state", "theta_m,omega_m,theta_L,omega_L", "--input", "Tm",
                       "-o", "model.json"),

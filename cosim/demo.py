@@ -67,7 +67,7 @@ from .study.cases import STUDY_SETTINGS
 from .study.paper import STATES, STUDY_DT
 
 #: The demo's identification experiment: a 1-40 Hz multisine at 20 % of the rated torque, from rest.
-DEMO_EXCITATION = "multisine:amp=0.2,fmin=1,fmax=40"
+DEMO_EXCITATION = "multisine:amp=1000,fmin=1,fmax=40"
 #: The demo's closed-loop scenarios: a 0.01 rad load-angle step, then a 500 N m load-torque step.
 DEMO_SCENARIOS = (setpoint_step(0.01, at=0.05, duration=2.0), disturbance_step(500.0, at=0.3, duration=2.0))
 #: Seconds of the data the diagnosis searches (from the start); None: the whole record.

@@ -104,7 +104,7 @@ class DataError(CosimError, ValueError):
 
 
 class SignalSpecError(CosimError, ValueError):
-    """An excitation signal specification such as ``square:amp=0.1,freq=2`` is malformed."""
+    """An excitation signal specification such as ``square:amp=500,freq=2`` is malformed."""
 
 
 class BuildError(CosimError, RuntimeError):

@@ -26,7 +26,7 @@ SCENARIOS = [setpoint_step(0.01, duration=2.0), disturbance_step(500.0, at=0.3, 
 
 def main() -> dict:
     fmu = build_fmu()
-    data = simulate(fmu, {"Tm": "multisine:amp=0.2,fmin=1,fmax=40"}, duration=round(4 / STUDY_DT) * STUDY_DT,
+    data = simulate(fmu, {"Tm": "multisine:amp=1000,fmin=1,fmax=40"}, duration=round(4 / STUDY_DT) * STUDY_DT,
                     dt=STUDY_DT).with_noise(0.05, seed=0)
     model = to_statespace(SINDYc(**STUDY_SETTINGS).fit(data, states=list(STATES), inputs=["Tm"]).model_)
     controllers = {

@@ -51,7 +51,7 @@ def test_fmu_info_lists_variables():
 
 def test_simulate_the_issue_example(tmp_path):
     out = tmp_path / "data.csv"
-    result = run("simulate", "bundled", "--input", "Tm=square:amp=0.1,freq=2", "--duration", "4", "--dt", "1/2257",
+    result = run("simulate", "bundled", "--input", "Tm=square:amp=500,freq=2", "--duration", "4", "--dt", "1/2257",
                  "--set", "Fc=0.3", "--noise", "0.1", "--seed", "0", "-o", str(out), "--json")
     assert result.exit_code == 0, result.stderr
     summary = json.loads(result.stdout)

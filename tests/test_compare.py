@@ -80,7 +80,7 @@ def identified(fmu, tmp_path_factory):
     folder = tmp_path_factory.mktemp("compare")
     runner = CliRunner()
     data = folder / "data.csv"
-    assert runner.invoke(main, ["simulate", str(fmu), "--input", "Tm=square:amp=0.1,freq=2", "--duration", "2",
+    assert runner.invoke(main, ["simulate", str(fmu), "--input", "Tm=square:amp=500,freq=2", "--duration", "2",
                                 "--dt", "1/2257", "--noise", "0.02", "-o", str(data)]).exit_code == 0
     result = runner.invoke(main, ["identify", str(data), "--state", "theta_m,omega_m,theta_L,omega_L", "--input",
                                   "Tm", "-o", str(folder / "model.json"), "--json"])
@@ -112,7 +112,7 @@ def test_compare_bad_input_is_one_line_exit_2(identified, tmp_path):
 
 def test_simulate_replays_its_own_recorded_inputs_exactly(fmu, tmp_path):
     runner = CliRunner()
-    first = ["simulate", str(fmu), "--input", "Tm=multisine:amp=0.2,fmin=1,fmax=40", "--input",
+    first = ["simulate", str(fmu), "--input", "Tm=multisine:amp=1000,fmin=1,fmax=40", "--input",
              "TL=step:value=300,at=0.2", "--duration", "1128/2257", "--dt", "1/2257", "--set", "Fc=50",
              "-o", str(tmp_path / "a.csv")]
     assert runner.invoke(main, first).exit_code == 0

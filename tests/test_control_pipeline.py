@@ -31,7 +31,7 @@ def identified(fmu):
     (The study's protocol - a square wave from a 4 rad initial twist - leaves the torque gain 30 % low to 120 %
     high at 5 % noise: the free oscillation dwarfs the excitation. A broadband excitation from rest pins it.)
     """
-    traj = simulate(fmu, {"Tm": "multisine:amp=0.2,fmin=1,fmax=40"}, duration=round(4.0 / STUDY_DT) * STUDY_DT,
+    traj = simulate(fmu, {"Tm": "multisine:amp=1000,fmin=1,fmax=40"}, duration=round(4.0 / STUDY_DT) * STUDY_DT,
                     dt=STUDY_DT).with_noise(0.05, seed=1)
     model = SINDYc(**STUDY_SETTINGS).fit(traj, states=list(STATES), inputs=["Tm"]).model_
     return to_statespace(model)

@@ -21,7 +21,7 @@ from cosim.identify.sindyc import IdentificationWarning, SINDYc
 from cosim.study.paper import STATES, STUDY_DT
 
 DURATION = round(2.0 / STUDY_DT) * STUDY_DT
-MULTISINE = "multisine:amp=0.2,fmin=1,fmax=40"
+MULTISINE = "multisine:amp=1000,fmin=1,fmax=40"
 #: A slew: the multisine on a 1000 N m bias, so that the angles turn through several radians (cogging and
 #: gravity are periodic in an angle: from rest the angles move 0.04 rad and sin(12 theta) looks linear)
 SLEW = MULTISINE + ",offset=1000"

@@ -19,7 +19,7 @@ from cosim.study.paper import STUDY_DT, STUDY_TABLE1, STUDY_X0
 
 STATES = ["theta_m", "omega_m", "theta_L", "omega_L"]
 KINEMATICS = {"theta_m": "omega_m", "theta_L": "omega_L"}
-EXCITATIONS = {"square": "square:amp=0.1,freq=1", "sine": "sine:amp=0.1,freq=5"}
+EXCITATIONS = {"square": "square:amp=500,freq=1", "sine": "sine:amp=500,freq=5"}
 
 
 def true_matrices() -> tuple[np.ndarray, np.ndarray]:

@@ -173,7 +173,7 @@ def free_run_r2(est: SINDYc, traj: Trajectory) -> np.ndarray:
 def _tour(noise: float) -> Trajectory:
     from cosim import build_fmu, simulate
 
-    return simulate(build_fmu(), {"Tm": "square:amp=0.1,freq=2"}, duration=4.0, dt=1 / 2257,
+    return simulate(build_fmu(), {"Tm": "square:amp=500,freq=2"}, duration=4.0, dt=1 / 2257,
                     parameters={"Fc": 0.3}).with_noise(noise, seed=0)
 
 

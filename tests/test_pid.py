@@ -553,7 +553,7 @@ def test_velocity_tune_on_an_identified_model(seed, friction):
     from cosim.study.cases import STUDY_SETTINGS
     from cosim.study.paper import STATES, STUDY_X0
 
-    data = simulate(build_fmu(), {"Tm": "square:amp=0.1,freq=2"}, duration=9028 * STUDY_DT, dt=STUDY_DT,
+    data = simulate(build_fmu(), {"Tm": "square:amp=500,freq=2"}, duration=9028 * STUDY_DT, dt=STUDY_DT,
                     start=STUDY_X0, parameters={"Fc": friction}).with_noise(0.05, seed=seed)
     model = to_statespace(SINDYc(**STUDY_SETTINGS).fit(data, states=list(STATES), inputs=["Tm"]).model_)
     assert model.B[1, 0] * 250.0 > 1.35  # the identified input gain is far off 1/Jm

@@ -85,7 +85,7 @@ def test_step_refuses_a_nonfinite_input_naming_it_and_the_time(fmu, bad):
 
 
 def test_simulate_returns_inputs_states_units_and_meta(fmu):
-    traj = simulate(fmu, {"Tm": "square:amp=0.1,freq=2"}, duration=1.0, dt=1e-3, parameters={"Fc": 10.0})
+    traj = simulate(fmu, {"Tm": "square:amp=500,freq=2"}, duration=1.0, dt=1e-3, parameters={"Fc": 10.0})
     assert len(traj) == 1001
     assert traj.inputs == ("Tm", "TL") and traj.states == ("theta_m", "omega_m", "theta_L", "omega_L")
     assert set(np.unique(traj["Tm"])) == {-500.0, 500.0}  # 10 % of the declared max torque 5000 N m

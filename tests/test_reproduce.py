@@ -20,7 +20,7 @@ def run(*args: str):
 @pytest.fixture(scope="module")
 def fmu_data(tmp_path_factory):
     path = tmp_path_factory.mktemp("identify") / "data.csv"
-    result = run("simulate", "bundled", "--input", "Tm=sine:amp=0.1,freq=5", "--duration", "3", "--dt", "1/2257",
+    result = run("simulate", "bundled", "--input", "Tm=sine:amp=500,freq=5", "--duration", "3", "--dt", "1/2257",
                  "--start", "theta_m=-2", "--start", "theta_L=2", "--start", "omega_L=1", "-o", str(path))
     assert result.exit_code == 0, result.stderr
     return path

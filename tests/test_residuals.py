@@ -64,8 +64,8 @@ def true_model():
 def fmu_runs():
     fmu = build_fmu()
     kw = {"duration": round(2.0 / STUDY_DT) * STUDY_DT, "dt": STUDY_DT}
-    clean = simulate(fmu, {"Tm": "multisine:amp=0.2,fmin=1,fmax=40"}, **kw)
-    friction = simulate(fmu, {"Tm": "multisine:amp=0.2,fmin=1,fmax=40"}, parameters={"Fc": 100.0}, **kw)
+    clean = simulate(fmu, {"Tm": "multisine:amp=1000,fmin=1,fmax=40"}, **kw)
+    friction = simulate(fmu, {"Tm": "multisine:amp=1000,fmin=1,fmax=40"}, parameters={"Fc": 100.0}, **kw)
     return clean, friction
 
 

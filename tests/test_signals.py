@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ from cosim.data.signals import (
     square,
     step,
 )
-from cosim.errors import InvalidSettingError, SignalSpecError
+from cosim.errors import CosimDeprecationWarning, InvalidSettingError, SignalSpecError
 
 # ----------------------------------------------------------------------------------------------------- square
 
@@ -254,42 +255,62 @@ def test_step_constant_and_arithmetic():
 @pytest.mark.parametrize(
     ("spec", "expected"),
     [
-        ("square:amp=0.1,freq=2", square(1.0, 2.0)),
-        ("square:amp=0.1,freq=2,duty=0.3,offset=-1,phase=1",
+        ("square:frac=0.1,freq=2", square(1.0, 2.0)),
+        ("square:amp=3,freq=2", square(3.0, 2.0)),  # amp: in the input's unit
+        ("square:frac=0.1,freq=2,duty=0.3,offset=-1,phase=1",
          square(1.0, 2.0, duty=0.3, offset=-1.0, phase=1.0)),
-        ("sine:amp=0.05,freq=5", sine(0.5, 5.0)),
-        ("prbs:amp=0.1,clock=0.01,order=9,seed=1", prbs(1.0, clock=0.01, order=9, seed=1)),
-        ("chirp:amp=0.1,f0=0.1,f1=20,duration=4", chirp(1.0, 0.1, 20.0, 4.0)),
+        ("sine:frac=0.05,freq=5", sine(0.5, 5.0)),
+        ("prbs:frac=0.1,clock=0.01,order=9,seed=1", prbs(1.0, clock=0.01, order=9, seed=1)),
+        ("chirp:frac=0.1,f0=0.1,f1=20,duration=4", chirp(1.0, 0.1, 20.0, 4.0)),
         ("chirp:value=2,f0=1,f1=20,duration=4,method=log", chirp(2.0, 1.0, 20.0, 4.0, method="logarithmic")),
-        ("multisine:amp=0.1,fmin=0.1,fmax=20,n=30", multisine(1.0, band=(0.1, 20.0), n=30)),
+        ("multisine:frac=0.1,fmin=0.1,fmax=20,n=30", multisine(1.0, band=(0.1, 20.0), n=30)),
         ("multisine:value=1,freqs=1;2.5;4,crest=schroeder",
          multisine(1.0, [1.0, 2.5, 4.0], crest="schroeder")),
-        ("step:amp=0.1,at=0.5", step(1.0, at=0.5)),
+        ("step:frac=0.1,at=0.5", step(1.0, at=0.5)),
+        ("step:amp=20,at=0.5", step(20.0, at=0.5)),
         ("const:value=3.0", constant(3.0)),
-        ("const:amp=0.5", constant(5.0)),
+        ("const:frac=0.5", constant(5.0)),
         ("3.5", constant(3.5)),
         ("-1/4", constant(-0.25)),
-        (" SINE : amp = 0.5 , freq = 1/2257 ", sine(5.0, 1 / 2257)),
+        (" SINE : frac = 0.5 , freq = 1/2257 ", sine(5.0, 1 / 2257)),
     ],
 )
-def test_parse_signal_each_kind(spec, expected):
+def test_parse_signal_each_kind(spec, expected, recwarn):
     assert parse_signal(spec, maximum=10.0) == expected
+    assert not [w for w in recwarn if issubclass(w.category, CosimDeprecationWarning)]
 
 
 def test_parse_signal_amplitude_sources():
-    assert parse_signal("square:amp=0.5,max=4,freq=1", maximum=10.0).amplitude == 2.0  # max= wins
-    assert parse_signal("square:amp=0.5,max=4,freq=1").amplitude == 2.0
+    assert parse_signal("square:frac=0.5,max=4,freq=1", maximum=10.0).amplitude == 2.0  # max= wins
+    assert parse_signal("square:frac=0.5,max=4,freq=1").amplitude == 2.0
     assert parse_signal("square:value=0.7,freq=1", maximum=10.0).amplitude == 0.7  # absolute
-    assert parse_signal("step:amp=-0.1", maximum=10.0).amplitude == -1.0
-    assert parse_signal("sine:amp=1/2257,freq=1", maximum=2257.0).amplitude == pytest.approx(1.0)
+    assert parse_signal("square:amp=0.7,freq=1").amplitude == 0.7  # absolute; no maximum needed
+    assert parse_signal("step:amp=-250", maximum=5000.0).amplitude == -250.0
+    assert parse_signal("step:frac=-0.1", maximum=10.0).amplitude == -1.0
+    assert parse_signal("sine:frac=1/2257,freq=1", maximum=2257.0).amplitude == pytest.approx(1.0)
+
+
+def test_an_old_fraction_amp_still_reads_as_before_with_a_deprecation_warning():
+    """Before 0.2, amp= was a fraction of the maximum: amp=0.1 on a 5000 N m input still means 500 N m, and says
+    what to write instead; where the two readings agree (a maximum of 1) or cannot be meant (no maximum, |amp| > 1)
+    nothing is said."""
+    with pytest.warns(CosimDeprecationWarning, match=r"write frac=0.1 for this, or value=0.1"):
+        assert parse_signal("square:amp=0.1,freq=2", maximum=5000.0).amplitude == 500.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CosimDeprecationWarning)
+        assert parse_signal("square:amp=0.1,freq=2").amplitude == 0.1
+        assert parse_signal("square:amp=0.5,freq=2", maximum=1.0).amplitude == 0.5
+        assert parse_signal("square:amp=1.5,freq=2", maximum=5000.0).amplitude == 1.5
 
 
 @pytest.mark.parametrize("name", list(SIGNAL_KINDS))
 def test_every_registered_kind_parses_its_example(name):
     kind = SIGNAL_KINDS[name]
-    sig = parse_signal(kind.example, maximum=2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CosimDeprecationWarning)  # the examples teach today's spelling
+        sig = parse_signal(kind.example, maximum=5000.0)
     assert isinstance(sig, Signal) and sig.kind == name
-    assert set(kind.required) <= set(kind.keys) and {"amp", "value", "max"} <= set(kind.keys)
+    assert set(kind.required) <= set(kind.keys) and {"amp", "frac", "value", "max"} <= set(kind.keys)
     assert np.all(np.isfinite(sig(np.linspace(0.0, 5.0, 101))))
     assert f"{name}:" in signal_kinds_help()
 
@@ -297,26 +318,27 @@ def test_every_registered_kind_parses_its_example(name):
 @pytest.mark.parametrize(
     ("spec", "maximum", "fragment"),
     [
-        ("squar:amp=0.1,freq=2", 1.0, "unknown kind 'squar'; expected one of: square, sine, prbs"),
-        ("square:amp=0.1,frq=2", 1.0, "unknown key 'frq' for square; valid keys: amp, value, max, freq"),
-        ("square:amp=0.1,freq=2", None, "declares no maximum; add max=VALUE"),
-        ("square:amp=0.1,freq=2x", 1.0, "freq='2x' is not a number"),
-        ("square:amp=0.1,freq=1/0", 1.0, "freq='1/0' is not a number"),
+        ("squar:amp=1,freq=2", 1.0, "unknown kind 'squar'; expected one of: square, sine, prbs"),
+        ("square:amp=1,frq=2", 1.0, "unknown key 'frq' for square; valid keys: amp, frac, value, max, freq"),
+        ("square:frac=0.1,freq=2", None, "declares no maximum; add max=VALUE"),
+        ("square:amp=1,freq=2x", 1.0, "freq='2x' is not a number"),
+        ("square:amp=1,freq=1/0", 1.0, "freq='1/0' is not a number"),
         ("square:amp=nan,freq=1", 1.0, "amp='nan' is not a number"),
         ("1/x", None, "is not a number"),
-        ("square:amp=0.1", 1.0, "missing required key(s) freq"),
-        ("chirp:amp=0.1,f0=1", 1.0, "missing required key(s) f1, duration"),
+        ("square:amp=1", 1.0, "missing required key(s) freq"),
+        ("chirp:amp=1,f0=1", 1.0, "missing required key(s) f1, duration"),
         ("square:freq=2", 1.0, "missing amplitude: add amp="),
-        ("square:amp=0.1,value=1,freq=2", 1.0, "not both"),
-        ("square:amp=0.1,amp=0.2,freq=2", 1.0, "given twice"),
-        ("square:amp=1.5,freq=2", 1.0, "outside -1..1"),
+        ("square:amp=1,value=1,freq=2", 1.0, "not amp= and value="),
+        ("square:amp=1,frac=0.2,freq=2", 1.0, "not amp= and frac="),
+        ("square:amp=1,amp=2,freq=2", 1.0, "given twice"),
+        ("square:frac=1.5,freq=2", 1.0, "outside -1..1"),
         ("square:amp,freq=2", 1.0, "is not key=value"),
-        ("prbs:amp=0.1,clock=0.01,order=9.5", 1.0, "order='9.5' must be a whole number"),
-        ("prbs:amp=0.1,clock=0.01,order=40", 1.0, "order must be between 2 and 24"),
-        ("square:amp=0.1,freq=-2", 1.0, "frequency must be > 0"),
-        ("multisine:amp=0.1,fmin=1", 1.0, "needs both fmin= and fmax="),
-        ("multisine:amp=0.1,n=3", 1.0, "missing required keys fmin and fmax"),
-        ("square:amp=0.1,freq=2", 0.0, "positive finite maximum"),
+        ("prbs:amp=1,clock=0.01,order=9.5", 1.0, "order='9.5' must be a whole number"),
+        ("prbs:amp=1,clock=0.01,order=40", 1.0, "order must be between 2 and 24"),
+        ("square:amp=1,freq=-2", 1.0, "frequency must be > 0"),
+        ("multisine:amp=1,fmin=1", 1.0, "needs both fmin= and fmax="),
+        ("multisine:amp=1,n=3", 1.0, "missing required keys fmin and fmax"),
+        ("square:frac=0.1,freq=2", 0.0, "positive finite maximum"),
         ("", None, "empty signal spec"),
     ],
 )

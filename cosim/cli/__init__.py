@@ -68,7 +68,7 @@ def main() -> None:
     \b
     Example:
       cosim fmu build
-      cosim simulate bundled --input Tm=square:amp=0.1,freq=2 --duration 4 --dt 1/2257 -o data.csv
+      cosim simulate bundled --input Tm=square:amp=500,freq=2 --duration 4 --dt 1/2257 -o data.csv
       cosim demo
     """
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import click
 
-from ..errors import CosimError, InvalidSettingError
+from ..errors import CosimDeprecationWarning, CosimError, InvalidSettingError
 from ..numbers import parse_number
 
 #: Exit status when the result does not meet what was asked (a failed spec, an unstable model): errors whose
@@ -51,6 +51,8 @@ def _friendly(func: Callable) -> Callable:
         try:
             with warnings.catch_warnings():
                 warnings.showwarning = _one_line_warning
+                # Python hides DeprecationWarnings outside __main__; a command's user must see an old spelling's
+                warnings.simplefilter("default", CosimDeprecationWarning)
                 return func(*args, **kwargs)
         except CosimError as exc:
             if os.environ.get("COSIM_DEBUG"):

@@ -17,7 +17,8 @@ __all__ = ["data", "simulate"]
 @click.command()
 @click.argument("path")
 @click.option("--input", "-i", "inputs", multiple=True, metavar="NAME=SPEC",
-              help="Input signal, e.g. Tm=square:amp=0.1,freq=2 (amp: fraction of the input's declared max). "
+              help="Input signal, e.g. Tm=square:amp=500,freq=2 (amp in the input's unit; frac=0.1: a fraction of its "
+                   "declared max). "
                    "Kinds: square, sine, prbs, chirp, multisine, step, const, or a number.")
 @click.option("--input-file", "input_file", type=click.Path(dir_okay=False), default=None, metavar="DATA",
               help="Drive the FMU's inputs from a recorded file (CSV, Parquet, .mat): every column named as an FMU "
@@ -60,7 +61,7 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
 
     \b
     Example:
-      cosim simulate bundled --input Tm=square:amp=0.1,freq=2 --duration 4 --dt 1/2257 \\
+      cosim simulate bundled --input Tm=square:amp=500,freq=2 --duration 4 --dt 1/2257 \\
           --set Fc=0.3 --noise 0.1 --seed 0 -o data.csv
       cosim simulate bundled --input-file data.csv --set Fc=0.3 -o again.csv
     """

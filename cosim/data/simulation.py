@@ -30,7 +30,7 @@ from .trajectory import Trajectory
 __all__ = ["HOLDS", "simulate", "InputSpec", "recorded_inputs", "sample_input"]
 
 #: What an input can be given as: a Signal (or any callable of time), a constant, samples at the
-#: communication points, or a signal spec string such as ``"square:amp=0.1,freq=2"``.
+#: communication points, or a signal spec string such as ``"square:amp=500,freq=2"``.
 InputSpec = Signal | Callable[[np.ndarray], Any] | float | np.ndarray | str
 
 _PROGRESS_MIN_STEPS = 200_000  # below this a run takes well under a second: no bar

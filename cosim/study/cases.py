@@ -24,7 +24,7 @@ STUDY_SETTINGS: dict[str, Any] = {"library": "linear", "include_constant": False
                                   "differentiation": "integral",
                                   "kinematics": {"theta_m": "omega_m", "theta_L": "omega_L"},
                                   "refine": "output_error"}
-_STUDY_EXCITATIONS = {"square": "square:amp=0.1,freq=1", "sine": "sine:amp=0.1,freq=5"}
+_STUDY_EXCITATIONS = {"square": "square:frac=0.1,freq=1", "sine": "sine:frac=0.1,freq=5"}
 
 
 def study_case(excitation: str, noise: float, seed: int, *, duration: float = 10.0, dt: float = STUDY_DT,
@@ -41,9 +41,9 @@ def study_case(excitation: str, noise: float, seed: int, *, duration: float = 10
     Parameters
     ----------
     excitation : str
-        ``"square"`` (``square:amp=0.1,freq=1``: +-10 % of the 5000 N m maximum torque, 1 Hz: long enough
+        ``"square"`` (``square:frac=0.1,freq=1``: +-10 % of the 5000 N m maximum torque, 1 Hz: long enough
         half-periods (0.5 s) for the rigid-body motion to build up, and its edges excite the 17.8 Hz
-        resonance), ``"sine"`` (``sine:amp=0.1,freq=5``, the study's 5 Hz sine), or any signal spec for
+        resonance), ``"sine"`` (``sine:frac=0.1,freq=5``, the study's 5 Hz sine), or any signal spec for
         ``Tm``.
     noise : float
         Noise level, e.g. 0.1 for 10 %.
