@@ -66,6 +66,11 @@ def read_records(paths: Sequence[str], *, states: Sequence[str], inputs: Sequenc
 
     state_specs = [s for s in states if s not in derive]
     state_names = [s.partition("=")[0].strip() for s in states]
+    for vel, pos in derive.items():
+        if vel not in state_names:
+            given = "--derive " + (pos if vel == f"{pos}_dot" else f"{vel}={pos}")
+            raise InvalidSettingError(f"{given} adds the velocity {vel}, which is not in --state "
+                                      f"{','.join(state_names)}: add it, --state {','.join([*state_names, vel])}")
     input_names = [s.partition("=")[0].strip() for s in inputs]
     sources = [p for p in dict.fromkeys(derive.values()) if p not in state_names]
     columns = list(dict.fromkeys([*state_specs, *sources, *inputs]))

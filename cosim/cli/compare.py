@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import click
 
+from ..errors import UnknownVariableError
 from ._command import _emit, _friendly, _names
 from ._data_options import data_options, derive_option, read_records
+from ._outputs import check_outputs
 
 __all__ = ["compare_command"]
 
@@ -42,14 +44,30 @@ def compare_command(model_path: str, data_path: str, horizon: int | None, initia
     from ..identify.compare import compare
     from ..identify.model import IdentifiedModel
 
+    check_outputs({"--plot": [plot_path]}, {"--plot": (".png", ".pdf", ".svg")})
     model = IdentifiedModel.load(model_path)
     derived = derive_option(derive)
     state_specs = _names(states, "--state") if states else list(model.states)
     input_specs = _names(inputs, "--input") if inputs else list(model.inputs)
-    [data] = read_records([data_path], states=state_specs, inputs=input_specs, derive=derived, time=time_column,
-                          derive_window=derive_window, resample=resample)
+    notes = []
+    try:
+        [data] = read_records([data_path], states=state_specs, inputs=input_specs, derive=derived,
+                              time=time_column, derive_window=derive_window, resample=resample)
+    except UnknownVariableError:
+        # the model's own velocities differentiated from positions when it was identified: derive them the same way
+        recorded = {v: p for v, p in ((model.meta.get("data") or {}).get("derived_velocities") or {}).items()
+                    if v in state_specs and v not in derived}
+        if not recorded:
+            raise
+        derived = {**derived, **recorded}
+        [data] = read_records([data_path], states=state_specs, inputs=input_specs, derive=derived,
+                              time=time_column, derive_window=derive_window, resample=resample)
+        notes.append("derived " + ", ".join(f"{v} from {p}" for v, p in recorded.items()) + " as when the model "
+                     "was identified (--derive " + ",".join(f"{v}={p}" for v, p in recorded.items()) + ")")
     result = compare(model, data, horizon=horizon, x0=initial_state)
     payload = result.to_dict()
+    if notes:
+        payload["notes"] = notes
     if plot_path:
         result.plot(plot_path)
         payload["plot"] = plot_path
@@ -57,6 +75,7 @@ def compare_command(model_path: str, data_path: str, horizon: int | None, initia
     lines = [f"{model_path} against {data_path} ({what}, {len(result.measured)} samples):"]
     lines += [f"  {n}: fit {result.fit_pct[n]:.2f} %  NRMSE {result.nrmse_pct[n]:.2f} %  R2 {result.r2[n]:.6g}"
               for n in result.fit_pct]
+    lines += [f"note: {n}" for n in notes]
     if plot_path:
         lines.append(f"wrote {plot_path}")
     _emit(as_json, payload, "\n".join(lines))

@@ -10,6 +10,7 @@ from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
 from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _split
 from ._data_options import data_options, derive_option, read_records
+from ._outputs import check_outputs
 
 __all__ = ["DIAGNOSE_MIN_SAMPLES", "diagnose_command"]
 
@@ -74,6 +75,8 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     from ..identify.sindyc import SINDYc
     from .identify import format_kinematics
 
+    check_outputs({"--report": [report_path], "-o/--output": [out]},
+                  {"--report": (".html", ".htm"), "-o/--output": (".json",)})  # before anything runs
     state_names, input_specs = _names(states, "--state"), _names(inputs, "--input")
     input_names = [spec.partition("=")[0].strip() for spec in input_specs]
     derived = derive_option(derive)

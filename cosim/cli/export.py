@@ -7,10 +7,14 @@ from typing import Any
 
 import click
 
+from ..errors import InvalidSettingError
 from ..numbers import parse_number
 from ._command import _emit, _friendly, _pairs, _split
+from ._outputs import check_outputs, staged_outputs
 
 __all__ = ["export_command"]
+
+_SUFFIXES = (".mat", ".fmu", ".json")
 
 
 def _name_values(text: str | None, option: str) -> dict[str, float] | None:
@@ -25,8 +29,9 @@ def _name_values(text: str | None, option: str) -> dict[str, float] | None:
 @click.option("-o", "--output", "--to", "targets", multiple=True, required=True, metavar="FILE",
               help="Output file; the suffix picks the format: .mat (A, B, C, D with names), .fmu (FMI 2.0 "
                    "co-simulation), .json (the model). Repeat for several.")
-@click.option("--dt", default=None, help="Discretise (zero-order hold) at this step [s]; an FMU needs it for a "
-              "linear model (default: the model's sampling step).")
+@click.option("--dt", default=None, help="Discretise (zero-order hold) at this step [s]. A .mat file is the "
+              "continuous state space without it, linear or linearised model alike; an FMU steps at --dt (default: "
+              "the model's sampling step).")
 @click.option("--constant", type=click.Choice(["input", "operating_point", "ignore"]), default="input",
               show_default=True, help="How a constant term is exported (.mat): an extra input 'const' held at 1, "
               "the model about its equilibrium, or dropped.")
@@ -47,21 +52,51 @@ def export_command(model_path: str, targets: tuple[str, ...], dt: str | None, co
     from ..export import export
     from ..identify.model import IdentifiedModel
 
+    check_outputs({"-o/--output": targets}, {"-o/--output": _SUFFIXES})  # all of them, before any is written
     model = IdentifiedModel.load(model_path)
     step = parse_number(dt, what="--dt") if dt else None
-    written = []
-    for target in targets:
-        suffix = Path(target).suffix.lower()
-        if suffix == ".mat":
-            point = _name_values(op, "--operating-point")
-            operating = None
-            if point is not None:
-                operating = ({k: v for k, v in point.items() if k in model.states},
-                             {k: v for k, v in point.items() if k in model.inputs})
-            options: dict[str, Any] = {"dt": step, "constant": constant, "operating_point": operating}
-        elif suffix == ".fmu":
-            options = {"dt": step or model.dt, "nsub": nsub}
-        else:
-            options = {}
-        written.append(str(export(model, target, **options)))
-    _emit(as_json, {"model": model_path, "written": written}, "\n".join(f"wrote {w}" for w in written))
+    if step is not None and not step > 0:
+        raise InvalidSettingError(f"--dt must be a positive step in seconds, e.g. --dt 1/2257; got {dt}")
+    operating = _operating_point(model, _name_values(op, "--operating-point"))
+    if operating is None and not model.is_linear and any(Path(t).suffix.lower() == ".mat" for t in targets):
+        nonlinear = [t for t in model.terms if not _is_linear_term(t, model)]
+        raise InvalidSettingError(f"{model_path} is nonlinear (terms {', '.join(nonlinear)}) and a .mat file holds a "
+                                  "linear state space: linearise it with --operating-point "
+                                  + ",".join(f"{n}=VALUE" for n in (*model.states, *model.inputs)))
+    written, notes = [], []
+    with staged_outputs(targets) as staged:  # every file or none: an FMU that does not build leaves no .mat
+        for target, place in zip(targets, staged, strict=True):
+            suffix = Path(target).suffix.lower()
+            options: dict[str, Any] = {}
+            if suffix == ".mat":
+                options = {"dt": step, "constant": constant, "operating_point": operating}
+                notes.append(f"{target}: " + ("continuous, dx/dt = A x + B u (--dt for the zero-order-hold discrete "
+                                              "one)" if step is None else f"discrete at dt={step:.9g} s (zero-order "
+                                              "hold), x[k+1] = A x[k] + B u[k]")
+                             + ("" if operating is None else ", linearised at --operating-point " + op))
+            elif suffix == ".fmu":
+                options = {"dt": step or model.dt, "nsub": nsub}
+            export(model, place, **options)
+            written.append(str(Path(target)))
+    _emit(as_json, {"model": model_path, "written": written, "notes": notes},
+          "\n".join([*(f"wrote {w}" for w in written), *(f"  {n}" for n in notes)]))
+
+
+def _operating_point(model: Any, point: dict[str, float] | None) -> tuple[dict, dict] | None:
+    """--operating-point as (states, inputs) by name; a name that is neither, or a state left out, is refused."""
+    if point is None:
+        return None
+    names = (*model.states, *model.inputs)
+    unknown = [k for k in point if k not in names]
+    if unknown:
+        raise InvalidSettingError(f"--operating-point {unknown[0]}: not a state or input of the model; give "
+                                  f"{', '.join(names)}")
+    missing = [k for k in names if k not in point]
+    if missing:
+        raise InvalidSettingError(f"--operating-point has no value for {', '.join(missing)}; add "
+                                  + ",".join(f"{k}=VALUE" for k in missing) + " (every state and input)")
+    return {k: point[k] for k in model.states}, {k: point[k] for k in model.inputs}
+
+
+def _is_linear_term(term: str, model: Any) -> bool:
+    return term == "1" or term in model.states or term in model.inputs

@@ -12,6 +12,7 @@ import click
 from ..numbers import parse_number
 from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _split
 from ._data_options import data_options, derive_option, read_records
+from ._outputs import check_outputs
 
 __all__ = ["identify_command", "parse_kinematics_option", "format_kinematics"]
 
@@ -95,6 +96,7 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
     from ..identify.compare import compare
     from ..identify.sindyc import IdentificationWarning, SINDYc
 
+    check_outputs({"-o/--output": [out]}, {"-o/--output": (".json",)})
     state_specs, input_specs = _names(states, "--state"), _names(inputs, "--input") if inputs else []
     state_names = [s.partition("=")[0].strip() for s in state_specs]
     input_names = [s.partition("=")[0].strip() for s in input_specs]
@@ -114,8 +116,12 @@ def identify_command(data: str, states: str, inputs: str, out: str | None, libra
     model = estimator.model_
     fit: dict[str, Any] = {}
     status = "ok"
-    if all(s in traj.names for s in model.states):
-        scores = compare(model, traj)
+    scored = traj
+    if derived:  # the fit is compare's on the same file with the same --derive: the velocities differentiated here
+        [scored] = read_records([data], states=state_specs, inputs=input_specs, derive=derived, time=time_column,
+                                resample=resample, derive_window=derive_window)
+    if all(s in scored.names for s in model.states):
+        scores = compare(model, scored)
         status = "ok" if all(math.isfinite(v) for v in scores.fit_pct.values()) else "diverged"
         fit = {key: getattr(scores, key) for key in ("fit_pct", "nrmse_pct", "r2")} if status == "ok" else {}
     if out:
