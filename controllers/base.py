@@ -193,6 +193,31 @@ class DesignModel:
                                        f"its {role} are {list(available)}")
         return [available.index(n) for n in names]
 
+    def static_gain(self, input: str, output: str) -> float | None:
+        """Steady-state gain ``C (I - A)^-1 B + D`` from `input` to `output`, or None where the model has no steady
+        state to speak of: a pole on or outside the unit circle (an integrator holds any output with no input), or
+        one a thousand times slower than its fastest (an identified integrator comes out so, a slow drift where
+        the record could not tell).
+
+        Examples
+        --------
+        >>> import control
+        >>> lag = DesignModel.from_statespace(control.ss(-2.0, 1.0, 3.0, 0.0, inputs=["u"], outputs=["y"]), dt=0.1)
+        >>> round(lag.static_gain("u", "y"), 6)
+        1.5
+        """
+        (i,), (j,) = self.index([input], "inputs"), self.index([output], "outputs")
+        lam = np.linalg.eigvals(self.A)
+        lam = lam[np.abs(lam) > 1e-12]  # poles at z = 0 (delays) have no continuous-time counterpart
+        s = (np.log(np.abs(lam)) + 1j * np.angle(lam)) / self.dt
+        if s.size and (np.any(s.real > -1e-6 / self.dt) or np.abs(s).min() < 1e-3 * np.abs(s).max()):
+            return None
+        try:
+            gain = float((self.C[j] @ np.linalg.solve(np.eye(self.A.shape[0]) - self.A, self.B[:, i])) + self.D[j, i])
+        except np.linalg.LinAlgError:
+            return None
+        return gain if math.isfinite(gain) else None
+
     def to_dict(self) -> dict[str, Any]:
         return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
                 "dt": self.dt, "states": list(self.states), "inputs": list(self.inputs),

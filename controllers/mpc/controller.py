@@ -110,7 +110,9 @@ class MPC(Controller):
         Weights on the input deviation from the target and on the input change per sample; ``r + r_delta``
         must be positive for every input.
     u_min, u_max, du_max : float or sequence, optional
-        Input bounds and largest input change per sample (default none).
+        Input bounds and largest input change per sample (default none). `u_max` alone mirrors into
+        ``u_min = -u_max``, as ``--u-max`` does in ``cosim design mpc`` (give ``u_min=-math.inf`` for no lower
+        bound).
     u0 : float or sequence, optional
         The input assumed applied before the first call (default 0, or the nearest bound).
     x0 : sequence or mapping, optional
@@ -204,6 +206,11 @@ class MPC(Controller):
         if constant:
             raise InvalidSettingError(f"input {constant[0]!r} is the model's constant term (held at 1); it cannot "
                                       "be manipulated")
+        if u_min is None and u_max is not None:
+            try:
+                u_min = -np.asarray(u_max, dtype=float)  # as --u-max alone does in `cosim design mpc`
+            except (TypeError, ValueError):
+                pass  # refused below, in the base class's words
         super().__init__(dt=dm.dt, inputs=inputs, outputs=outputs, tracked=tracked, u_min=u_min, u_max=u_max,
                          du_max=du_max)
         self.model = self.design_model = dm

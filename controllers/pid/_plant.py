@@ -52,6 +52,7 @@ class _Plant:
             c = np.hstack([c, np.zeros((len(rows), delay - 1)), d])
             d = np.zeros((len(rows), 1))
         self.A, self.B, self.C, self.D, self.dt, self.delay = a, b, c, d, h, delay
+        self.model = model
         self.input, self.output = model.inputs[i_in], model.outputs[i_out]
         self.velocity = None if i_vel is None else model.outputs[i_vel]
         self.kds = np.zeros(0)  # velocity gains the search tries (set by tune_pid)

@@ -5,19 +5,23 @@ At a crossover ``wc`` :func:`_shapes_at` solves the PI and PID shapes (or, with 
 gains for each velocity gain) that put the loop's phase margin exactly at ``wc``; :func:`_robust_at` keeps
 those that meet the margins with a stable closed loop; :func:`_step_figures` predicts their setpoint and
 load steps; :func:`_design` runs down the crossovers and picks the design; :func:`_not_met` explains a
-failure.
+failure. With input limits and a set-point step to deliver (:class:`_Demand`), :func:`_deliver` also steps the
+PID's exact law, limits and anti-windup on, against the model (:mod:`controllers.pid._saturation`), and a
+design is admissible only when that saturated step keeps the overshoot limit too.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
 
 from ._plant import _loop_figures, _Plant, _shape, _wrap
+from ._saturation import _Actuator, _figures, _saturated_steps
 
 #: Integral times ``Ti*wc`` and derivative filters ``n = Td/tf`` the search tries at each crossover.
 _ALPHAS = (1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0)
@@ -37,6 +41,28 @@ _FIRST_TOL = 0.01
 _B_GRID = np.linspace(0.0, 1.0, 41)
 _SETTLE = 0.02
 _STEPS = 2000
+#: With a step to deliver: every this many crossovers of the grid are tried first (a coarse scan down to the
+#: highest crossover that delivers it), the best designs by load-step IAE stepped there, the set-point weights
+#: tried under saturation, and the saturated run's length in linear horizons.
+_COARSE = 4
+_COARSE_BEST = 4
+_SAT_WEIGHTS = 3
+_SAT_HORIZONS = 2.0
+
+
+@dataclass(frozen=True)
+class _Demand:
+    """A set-point step the design must deliver through its actuator: `step` (and its opposite when the
+    limits are not symmetric about the bias)."""
+
+    step: float
+    act: _Actuator
+
+    @property
+    def steps(self) -> tuple[float, ...]:
+        a = self.act
+        symmetric = math.isclose(a.hi - a.u0, a.u0 - a.lo, rel_tol=1e-12) or not math.isfinite(a.hi - a.lo)
+        return (self.step,) if symmetric else (self.step, -self.step)
 
 
 class _Candidate:
@@ -47,6 +73,9 @@ class _Candidate:
         self.figs: dict[str, Any] = {}
         self.b = self.overshoot = self.settling = self.iae_load = math.nan
         self.admissible = False
+        self.horizon = math.nan  # length of the predicted linear step [s]
+        self.ok_b: np.ndarray = np.zeros(0)  # set-point weights whose linear step is admissible, best first
+        self.delivers: bool | None = None  # the saturated step keeps the limits (None: not stepped)
 
     def gains(self) -> tuple[float, float, float, float]:
         return self.kp, self.kp / self.ti, self.kp * self.td, self.tf
@@ -195,22 +224,35 @@ def _step_figures(plant: _Plant, c: _Candidate, b: float | None, max_overshoot: 
         settling = np.maximum(settling, ts)
     ok = np.ones(weights.size, bool) if max_overshoot is None else overshoot <= max_overshoot + 1e-9
     c.admissible = bool(ok.any() and np.isfinite(settling[ok]).any())
+    c.horizon = k * step
+    good = ok & np.isfinite(settling)
+    c.ok_b = weights[good][np.argsort(settling[good], kind="stable")]
     j = int(np.argmin(np.where(ok, settling, np.inf))) if c.admissible else int(np.argmin(overshoot))
     c.b, c.overshoot, c.settling = float(weights[j]), float(overshoot[j]), float(settling[j])
 
 
 def _design(plant: _Plant, pm: float, bandwidth: float | None, derivative: bool | None, gm_min: float,
             mm_min: float, w_max: float, ns: Sequence[float], b: float | None,
-            max_overshoot: float | None) -> tuple[_Candidate | None, list[_Candidate]]:
+            max_overshoot: float | None, demand: _Demand | None = None) -> tuple[_Candidate | None, list[_Candidate]]:
     """The chosen design (None when no shape is robust) and every robust candidate that was considered.
 
-    Admissible candidates (overshoot within `max_overshoot`) compete on the load-step IAE; when there are
-    none, the one with the least overshoot is returned (its ``admissible`` is False).
+    Admissible candidates (overshoot within `max_overshoot`; with a `demand`, also in the saturated step)
+    compete on the load-step IAE; when there are none, the one with the least overshoot is returned (its
+    ``admissible`` is False); with a demand no design delivers, the design without it (``delivers`` False).
     """
+    if demand is not None:
+        best, robust = _deliver(plant, pm, bandwidth, derivative, gm_min, mm_min, w_max, ns, b, max_overshoot,
+                                demand)
+        if best is not None:
+            return best, robust
+        best, _ = _design(plant, pm, bandwidth, derivative, gm_min, mm_min, w_max, ns, b, max_overshoot)
+        if best is not None:
+            best.delivers = False
+        return best, robust
     if bandwidth is not None:
         grid = np.array([bandwidth])
     else:
-        grid = w_max * 10.0 ** (-np.arange(int(_WC_DECADES * _WC_PER_DECADE) + 1) / _WC_PER_DECADE)
+        grid = _grid(w_max)
     robust: list[_Candidate] = []
     w_robust = w_admissible = 0.0  # highest crossovers with a robust and with an admissible candidate
     for wc in grid:
@@ -222,19 +264,107 @@ def _design(plant: _Plant, pm: float, bandwidth: float | None, derivative: bool 
             w_robust = w_robust or float(wc)
             if c.admissible and not w_admissible:
                 w_admissible = float(wc)
+    return _choose(robust), robust
+
+
+def _grid(w_max: float) -> np.ndarray:
+    return w_max * 10.0 ** (-np.arange(int(_WC_DECADES * _WC_PER_DECADE) + 1) / _WC_PER_DECADE)
+
+
+def _choose(robust: list[_Candidate]) -> _Candidate | None:
     if not robust:
-        return None, robust
+        return None
     admissible = [c for c in robust if c.admissible]
     if admissible:
-        return min(admissible, key=lambda c: c.iae_load), robust
-    return min(robust, key=lambda c: (round(c.overshoot, 3), c.iae_load)), robust
+        return min(admissible, key=lambda c: c.iae_load)
+    return min(robust, key=lambda c: (round(c.overshoot, 3), c.iae_load))
+
+
+def _saturated_check(plant: _Plant, cands: list[_Candidate], demand: _Demand, max_overshoot: float | None) -> None:
+    """Step every candidate with a linearly admissible step through the actuator (a few set-point weights, the
+    loop gains of ``plant.gains`` at their extremes, both step signs when the limits are not symmetric); keep
+    for each the weight whose saturated steps all keep `max_overshoot` and settle, settling fastest at the
+    model's gain; set ``delivers`` and ``admissible``."""
+    todo = [c for c in cands if c.admissible and c.delivers is None]
+    if not todo:
+        return
+    gains = sorted({min(plant.gains), 1.0, max(plant.gains)})
+    steps = demand.steps
+    rows, owners = [], []
+    for i, c in enumerate(todo):
+        lower = np.sort(c.ok_b[c.ok_b < c.b])  # a lower weight kicks the input less at the step
+        weights = [c.b, *lower[np.linspace(0, lower.size - 1, _SAT_WEIGHTS - 1).astype(int)]] if lower.size else [c.b]
+        for w in list(dict.fromkeys(float(x) for x in weights))[:_SAT_WEIGHTS]:
+            kp, ki, kd, tf = c.gains()
+            for g in gains:
+                for st in steps:
+                    rows.append((g * kp, g * ki, g * kd, tf, w, st))
+                    owners.append((i, w, g))
+    arr = np.array(rows)
+    n = max(2, math.ceil(_SAT_HORIZONS * max(c.horizon for c in todo) / plant.dt))
+    y, _ = _saturated_steps(plant, arr[:, :4], arr[:, 4], arr[:, 5], demand.act, n)
+    overshoot = np.empty(arr.shape[0])
+    settling = np.empty(arr.shape[0])
+    for st in steps:  # _figures takes one step size
+        j = arr[:, 5] == st
+        overshoot[j], settling[j] = _figures(y[:, j], st, plant.dt)
+    limit = math.inf if max_overshoot is None else max_overshoot + 1e-9
+    verdict: dict[tuple[int, float], list[float]] = {}  # (candidate, weight) -> [ok, nominal settling, overshoot]
+    for (i, w, g), os_, ts in zip(owners, overshoot, settling, strict=True):
+        entry = verdict.setdefault((i, w), [1.0, 0.0, 0.0])
+        entry[0] = entry[0] * float(os_ <= limit and math.isfinite(ts))
+        if g == 1.0:
+            entry[1], entry[2] = max(entry[1], ts), max(entry[2], os_)
+    for i, c in enumerate(todo):
+        options = [(ts, w, os_) for (j, w), (ok, ts, os_) in verdict.items() if j == i and ok]
+        c.delivers = c.admissible = bool(options)
+        if options:
+            c.settling, c.b, c.overshoot = min(options)
+
+
+def _deliver(plant: _Plant, pm: float, bandwidth: float | None, derivative: bool | None, gm_min: float,
+             mm_min: float, w_max: float, ns: Sequence[float], b: float | None, max_overshoot: float | None,
+             demand: _Demand) -> tuple[_Candidate | None, list[_Candidate]]:
+    """:func:`_design` with a step to deliver: the highest crossover whose design delivers it is found on a
+    coarse scan (every :data:`_COARSE` th crossover, its :data:`_COARSE_BEST` best designs by IAE stepped), then
+    the crossovers just above it and down to half the highest delivering one compete as in :func:`_design`.
+    None when no robust design delivers the step."""
+    cache: dict[int, list[_Candidate]] = {}
+    grid = np.array([bandwidth]) if bandwidth is not None else _grid(w_max)
+
+    def at(i: int) -> list[_Candidate]:
+        if i not in cache:
+            cache[i] = _robust_at(plant, float(grid[i]), pm, derivative, gm_min, mm_min, ns)
+            for c in cache[i]:
+                _step_figures(plant, c, b, max_overshoot)
+        return cache[i]
+
+    top = None
+    for i in range(0, grid.size, _COARSE):
+        best = sorted((c for c in at(i) if c.admissible), key=lambda c: c.iae_load)[:_COARSE_BEST]
+        _saturated_check(plant, best, demand, max_overshoot)
+        if any(c.delivers for c in best):
+            top = i
+            break
+    if top is None:
+        return None, [c for cands in cache.values() for c in cands]
+    above = [c for i in range(max(0, top - _COARSE + 1), top) for c in at(i)]
+    _saturated_check(plant, above, demand, max_overshoot)
+    w_top = max(c.wc for c in [*above, *cache[top]] if c.delivers)
+    below = [c for i in range(top, grid.size) if grid[i] >= w_top / _WC_SPAN for c in at(i)]
+    bar = min((c.iae_load for c in [*above, *below] if c.delivers), default=math.inf)
+    _saturated_check(plant, [c for c in below if c.iae_load < bar], demand, max_overshoot)
+    competing = [c for c in [*above, *below] if c.delivers is not None or not c.admissible]
+    for c in competing:
+        c.admissible = bool(c.delivers)
+    considered = [c for cands in cache.values() for c in cands]
+    return _choose([c for c in competing if c.wc >= w_top / _WC_SPAN]), considered
 
 
 def _any_robust(plant: _Plant, pm: float, bandwidth: float | None, derivative: bool | None, gm_min: float,
                 mm_min: float, w_max: float, ns: Sequence[float]) -> _Candidate | None:
     """The highest-crossover robust candidate (margins and stability only), or None."""
-    grid = ([bandwidth] if bandwidth is not None else
-            w_max * 10.0 ** (-np.arange(int(_WC_DECADES * _WC_PER_DECADE) + 1) / _WC_PER_DECADE))
+    grid = [bandwidth] if bandwidth is not None else _grid(w_max)
     for wc in grid:
         found = _robust_at(plant, float(wc), pm, derivative, gm_min, mm_min, ns)
         if found:

@@ -25,17 +25,19 @@ from __future__ import annotations
 
 import copy
 import math
+import warnings
 from typing import Any
 
 import control
 import numpy as np
 
-from cosim.errors import ControllerError, InvalidSettingError, UnknownVariableError
+from cosim.errors import ControllerError, CosimDeprecationWarning, InvalidSettingError, UnknownVariableError
 from cosim.numbers import finite_number as _finite
 
 from ..base import KNOWN_CONSTANT_INPUTS, DesignModel
 from ._plant import _antiresonance, _Plant, _wrap
-from ._search import _NS, _WC_DECADES, _Candidate, _design, _not_met, _step_figures
+from ._saturation import _STEADY_FRACTION, _Actuator, _default_step, _figures, _pid_step, _static_gain
+from ._search import _NS, _SAT_HORIZONS, _WC_DECADES, _Candidate, _Demand, _design, _not_met, _step_figures
 from .controller import PID
 
 __all__ = ["tune_pid"]
@@ -139,7 +141,7 @@ def _loop_report(pid: PID, plant: _Plant) -> dict[str, Any]:
         nominal.gains = (1.0,)
         _step_figures(nominal, c, pid.b, None)
         info.update(step_overshoot_pct=c.overshoot, step_settling_time_s=c.settling,
-                    load_step_iae=c.iae_load)
+                    load_step_iae=c.iae_load, _horizon=c.horizon)
         if plant.gains != (1.0,):
             _step_figures(plant, c, pid.b, None)
             info.update(loop_gain_range=[min(plant.gains), max(plant.gains)], step_overshoot_worst_pct=c.overshoot,
@@ -147,13 +149,47 @@ def _loop_report(pid: PID, plant: _Plant) -> dict[str, Any]:
     return info
 
 
-def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, output: str | None = None,
+def _limit_report(pid: PID, plant: _Plant, act: _Actuator, step: float | None, horizon: float) -> dict[str, Any]:
+    """What the limits do to the set-point step: the largest step that stays linear, and the step of `step` run
+    through :class:`PID` itself (limits, rate limit, anti-windup) against the model: its overshoot, settling
+    time and input peak."""
+    n = max(2, math.ceil(_SAT_HORIZONS * horizon / plant.dt))
+    free = copy.deepcopy(pid)
+    free._umin, free._umax, free._dumax = -math.inf, math.inf, math.inf
+    _, u = _pid_step(free, plant, 1.0, n)
+    rise, fall = u - pid.u0, pid.u0 - u  # per unit step up; a step down mirrors it
+    room_up = min(_room(act.hi - pid.u0, rise), _room(pid.u0 - act.lo, fall))
+    room_down = min(_room(act.hi - pid.u0, fall), _room(pid.u0 - act.lo, rise))
+    du = np.abs(np.diff(u))
+    room_rate = act.du / du.max() if du.size and du.max() > 0 else math.inf
+    info: dict[str, Any] = {"linear_step_max": min(room_up, room_down, room_rate)}
+    if step is None:
+        return info
+    worst = None
+    for s in {step, -step} if room_up != room_down else {step}:
+        y, u = _pid_step(pid, plant, s, n)
+        overshoot, settling = (float(v[0]) for v in _figures(y[:, None], s, plant.dt))
+        if worst is None or (overshoot, settling) > worst[:2]:
+            worst = (overshoot, settling, float(np.abs(u).max()))
+    assert worst is not None
+    info.update(step_overshoot_pct=worst[0], step_settling_time_s=worst[1], step_input_peak=worst[2])
+    return info
+
+
+def _room(room: float, per_unit: np.ndarray) -> float:
+    """The largest step whose input `per_unit * step` stays within `room`."""
+    top = float(per_unit.max())
+    return room / top if top > 0 else math.inf
+
+
+def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, tracked: str | None = None,
              velocity: str | None = None, phase_margin: float | None = None, bandwidth: float | None = None,
              bandwidth_hz: float | None = None, derivative: bool | None = None, gain_margin_db: float = 6.0,
              modulus_margin: float = 0.5, max_overshoot: float | None = 10.0, max_crossover: float | None = None,
              delay: int = 0, b: float | None = None, n: float | None = None, u_min: float | None = None,
              u_max: float | None = None, du_max: float | None = None, u0: float = 0.0,
-             anti_windup: str | None = "back-calculation", tt: float | None = None) -> PID:
+             anti_windup: str | None = "back-calculation", tt: float | None = None, step: float | None = None,
+             output: str | None = None) -> PID:
     """Design a discrete :class:`PID` on a linear model for a phase margin, or a crossover frequency.
 
     Method (PID on one output): loop shaping at the gain crossover ``wc`` on the *discrete* loop
@@ -163,7 +199,7 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     ``n = Td/tf`` (2 to 30) the derivative time ``Td`` is solved so that ``arg L = -180 deg + PM`` exactly (and
     for the PI, ``Ti`` is solved), then ``kp`` makes ``|L| = 1``.
 
-    Method (with `velocity`: PI on `output`, ``D = -kd * velocity``): a direct search on the exact discrete
+    Method (with `velocity`: PI on `tracked`, ``D = -kd * velocity``): a direct search on the exact discrete
     loop broken at the plant input, ``L(z) = (kp + ki*dt/(z - 1)) P(z) + kd P_v(z)`` (``P_v``: input to
     velocity). ``L`` is linear in the gains, so for each velocity gain ``kd`` on a grid (1/1000 up to the gain
     whose velocity loop alone crosses over at `max_crossover`, 32 per decade) and each candidate ``wc``, ``kp``
@@ -188,6 +224,20 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     ``control.stability_margins`` on the exact discrete frequency response of the same loop and stored in
     ``pid.info``.
 
+    **Input limits.** With a limit (`u_max`, `u_min` or `du_max`) the design must also deliver a set-point
+    `step` through the actuator: a design is admissible only when its step, run through the PID's exact
+    discrete law with the limits, rate limit and anti-windup on (the model sampled with zero-order hold; the
+    loop gains as above, at their extremes; both directions when the limits are not symmetric about `u0`),
+    keeps `max_overshoot` and settles. Saturating briefly is allowed: that is what the anti-windup is for.
+    The step defaults to the one whose steady input takes half the actuator's range (its narrower side about
+    `u0`), ``0.5 * u_max * |G(0)|`` for symmetric limits, ``G(0)`` the static gain from `input` to `tracked`;
+    an integrating plant holds any position without input, so there no step is derived and the design is the
+    linear one, with ``info["linear_step_max"]`` the largest step that keeps the input within the limits
+    (give `step` to design for a larger one). When the step needs a steady input beyond the limit, or no
+    robust design delivers it, the linear design is kept and ``info["warnings"]`` says so with the largest
+    step that stays linear. The crossover search runs every 4th crossover down to the first one whose best
+    designs deliver the step, then the crossovers around it as above.
+
     Parameters
     ----------
     sys : control.StateSpace
@@ -195,12 +245,13 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
         constant term) are ignored.
     dt : float
         Controller sample time [s].
-    input, output : str, optional
-        Manipulated input and controlled output; default the first non-"const" input and the first output.
+    input, tracked : str, optional
+        Manipulated input and controlled (tracked) output, as ``--input`` and ``--tracked`` of
+        ``cosim design pid``; default the first non-"const" input and the first output.
     velocity : str, optional
         A measured output to take the derivative action from, e.g. ``"omega_m"`` (a velocity collocated with
-        `input` damps a resonance between them and `output`). The PID then measures `output` and `velocity`
-        (``pid.outputs`` in the model's output order) and tracks `output`; the velocity is not filtered.
+        `input` damps a resonance between them and `tracked`). The PID then measures `tracked` and `velocity`
+        (``pid.outputs`` in the model's output order) and tracks `tracked`; the velocity is not filtered.
     phase_margin : float, optional
         Phase margin [deg] at the crossover, default 60; with `velocity` 48: a servo floor of 45 deg plus
         3 deg for the model's errors (a model a few % off moves it by up to 2 deg), and no more, because the
@@ -218,8 +269,9 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
         Robustness constraints: gain margin [dB] (default 6) and smallest ``|1 + L|`` (default 0.5, a
         sensitivity peak of at most 2).
     max_overshoot : float or None
-        Largest overshoot [%] of the predicted linear setpoint step (default 10); None: no limit. When no
-        robust design meets it, the one with the least overshoot is kept and ``info["warnings"]`` says so.
+        Largest overshoot [%] of the predicted setpoint step (default 10; with limits, of the linear step and of
+        the saturated step of `step`); None: no limit. When no robust design meets it, the one with the least
+        overshoot is kept and ``info["warnings"]`` says so.
     max_crossover : float, optional
         Upper end of the crossover search [rad/s]; default ``0.2/dt`` (Åström & Wittenmark's rule of thumb
         ``wc*dt`` of 0.15 to 0.5 for the sample rate).
@@ -231,7 +283,14 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     n : float, optional
         Fix the derivative filter ``n = Td/tf`` instead of searching it (not with `velocity`).
     u_min, u_max, du_max, u0, anti_windup, tt
-        Passed on to :class:`PID` (limits, bias, anti-windup).
+        Passed on to :class:`PID` (limits, bias, anti-windup). `u_max` alone mirrors into ``u_min = -u_max``,
+        as ``--u-max`` does in ``cosim design pid`` (give ``u_min=-math.inf`` for no lower limit).
+    step : float, optional
+        The set-point step [unit of `tracked`] the design must deliver through the limits (see *Input
+        limits*); default derived from the plant. Stored as ``info["design_step"]``; ``cosim validate`` steps
+        by it by default.
+    output : str, optional
+        Deprecated name of `tracked` (a ``DeprecationWarning``).
 
     Returns
     -------
@@ -242,11 +301,15 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
         loops), ``phase_margin_deg`` (the smallest over the gain crossings, lag or lead), ``crossover_rad_s``
         (= ``bandwidth_rad_s``; where that margin is), ``crossover_hz``, ``gain_crossovers_rad_s``,
         ``modulus_margin`` (min ``|1 + L|``) and ``sensitivity_peak``, ``closed_loop_stable``,
-        ``closed_loop_bandwidth_rad_s``, and the predicted linear ``step_overshoot_pct``,
-        ``step_settling_time_s`` (2 %) and ``load_step_iae`` (per unit input step); with `velocity` also
-        ``loop_gain_range`` and the worst step figures over it, ``step_overshoot_worst_pct`` and
-        ``step_settling_time_worst_s``, ``antiresonance_rad_s`` and the resulting ``max_crossover_rad_s``.
-        All loop figures are for the loop broken at the plant input.
+        ``closed_loop_bandwidth_rad_s``, and the predicted ``step_overshoot_pct``, ``step_settling_time_s``
+        (2 %) and ``load_step_iae`` (per unit input step); with `velocity` also ``loop_gain_range`` and the
+        worst linear step figures over it, ``step_overshoot_worst_pct`` and ``step_settling_time_worst_s``,
+        ``antiresonance_rad_s`` and the resulting ``max_crossover_rad_s``. All loop figures are for the loop
+        broken at the plant input. With limits: ``design_step`` and ``design_step_source``,
+        ``linear_step_max``, ``delivers_step``, ``step_input_peak``, and ``step_overshoot_pct`` and
+        ``step_settling_time_s`` are those of the saturated step of `design_step` (the loop's with its limits),
+        ``step_overshoot_linear_pct`` and ``step_settling_time_linear_s`` the linear ones; ``notes`` and
+        ``warnings`` say what the limits did.
 
     Raises
     ------
@@ -262,8 +325,8 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     fast sampling the poles crowd ``z = 1`` and python-control's polynomial method is ill-conditioned (it
     falls back to its own coarse grid, which misses a 1 % damped resonance). A gain crossing with phase lead
     (a collocated velocity loop has them) counts with ``|180 deg + arg L|``, wrapped, where python-control
-    reports a negative number. Predicted step figures are those of the linear model; friction, backlash and
-    saturation are not in them.
+    reports a negative number. Predicted step figures are those of the linear model, with the PID's limits
+    when it has them; friction and backlash are not in them.
 
     Examples
     --------
@@ -278,15 +341,37 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
 
     >>> motor = control.ss([[0, 1], [0, -2]], [[0], [4]], [[1, 0], [0, 1]], 0, inputs=["V"],
     ...                    outputs=["angle", "speed"])
-    >>> pid = tune_pid(motor, dt=0.001, output="angle", velocity="speed", bandwidth=20.0)
+    >>> pid = tune_pid(motor, dt=0.001, tracked="angle", velocity="speed", bandwidth=20.0)
     >>> pid.outputs, pid.tracked, pid.info["structure"]
     (('angle', 'speed'), ('angle',), 'PI+velocity')
     >>> round(pid.info["crossover_rad_s"], 2), round(pid.info["phase_margin_deg"], 1)
     (20.0, 48.0)
+
+    A mass on a spring (1 kg, 100 N/m) and a force limit of 50 N: the design delivers a 0.25 m step (its steady
+    force is half the limit); the predicted overshoot is that of the loop with the limit (the input saturates
+    for steps above 0.079 m).
+
+    >>> spring = control.ss([[0, 1], [-100, -1]], [[0], [1]], [[1, 0]], 0, inputs=["F"], outputs=["x"])
+    >>> pid = tune_pid(spring, dt=0.001, u_max=50)
+    >>> pid.u_min.tolist(), pid.info["design_step"], pid.info["delivers_step"]
+    ([-50.0], 0.25, True)
+    >>> round(pid.info["step_overshoot_pct"], 1), pid.info["step_input_peak"], round(pid.info["linear_step_max"], 3)
+    (8.7, 50.0, 0.079)
     """
+    if output is not None:
+        warnings.warn("tune_pid(output=...) is deprecated and will be removed; use tracked=... (the name of "
+                      "`cosim design pid --tracked`)", CosimDeprecationWarning, stacklevel=2)
+        if tracked is not None and tracked != output:
+            raise InvalidSettingError(f"give the tracked output once: tracked={tracked!r} and output={output!r}")
+        tracked = output
+    if u_min is None and u_max is not None:
+        try:
+            u_min = -float(u_max)  # as --u-max alone does in `cosim design pid`
+        except (TypeError, ValueError):
+            pass  # the PID refuses it below, in its own words
     model = DesignModel.from_statespace(sys, dt=dt)
     h = model.dt
-    i_in, i_out = _select_signals(model, input, output)
+    i_in, i_out = _select_signals(model, input, tracked)
     i_vel = _select_velocity(model, velocity, i_out)
     if bandwidth is not None and bandwidth_hz is not None:
         raise InvalidSettingError("give the bandwidth in rad/s (bandwidth=) or in Hz (bandwidth_hz=), not both")
@@ -321,7 +406,12 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     ns = _NS if n is None else (_finite(n, "n", low=0.0, strict=True),)
     if b is not None:
         b = _finite(b, "b", low=0.0)
-    PID(kp=1.0, dt=h, u_min=u_min, u_max=u_max, du_max=du_max, u0=u0, anti_windup=anti_windup)  # check them now
+    check = PID(kp=1.0, dt=h, u_min=u_min, u_max=u_max, du_max=du_max, u0=u0, anti_windup=anti_windup, tt=tt)
+    act = _Actuator(check._umin, check._umax, check._dumax, check.u0, anti_windup, tt)
+    if step is not None:
+        step = _finite(step, "step")
+        if step == 0:
+            raise InvalidSettingError("step is the set-point step the design must deliver; give a non-zero one")
     w_lo = min(w_max, bandwidth or w_max) * 10.0 ** -(_WC_DECADES + 2)
     plant = _Plant(model, i_in, i_out, delay, w_lo, i_vel)
     w_anti = None
@@ -337,7 +427,8 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
             plant.wc_cap = _ANTIRESONANCE_FRACTION * w_anti
     gm_min = 10.0 ** (gm_db / 20.0)
     pm = math.radians(pm_deg)
-    best, robust = _design(plant, pm, bandwidth, derivative, gm_min, mm_min, w_max, ns, b, max_overshoot)
+    step, source, demand, steady_note = _demand(plant, act, step)
+    best, robust = _design(plant, pm, bandwidth, derivative, gm_min, mm_min, w_max, ns, b, max_overshoot, demand)
     if best is None:
         raise ControllerError(_not_met(plant, pm_deg, bandwidth, derivative, gm_db, gm_min, mm_min, w_max, ns))
     notes = [] if best.admissible or max_overshoot is None else [
@@ -364,6 +455,59 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, ou
     pid = PID(kp=kp, ki=ki, kd=kd, tf=tf, dt=h, b=best.b, inputs=[plant.input], outputs=outputs,
               velocity=plant.velocity, u_min=u_min, u_max=u_max, du_max=du_max, u0=u0, anti_windup=anti_windup,
               tt=tt)
-    pid.info = {**info, **_loop_report(pid, plant)}
+    report = _loop_report(pid, plant)
+    horizon = report.pop("_horizon", None)
+    if step is not None:
+        report.update(design_step=step, design_step_source=source)
+    if act.limited:
+        report.update(design_step=step, design_step_source=source, delivers_step=best.delivers,
+                      step_overshoot_linear_pct=report.get("step_overshoot_pct"),
+                      step_settling_time_linear_s=report.get("step_settling_time_s"))
+        if horizon is not None:
+            report.update(_limit_report(pid, plant, act, step, horizon))
+        report["notes"] = _limit_notes(report, plant, step, steady_note, max_overshoot, notes)
+    pid.info = {**info, **report}
     pid.design_model = model
     return pid
+
+
+def _demand(plant: _Plant, act: _Actuator, step: float | None) -> tuple[float | None, str | None, _Demand | None,
+                                                                          str | None]:
+    """The design step, where it comes from, what the search must deliver (None: the linear design), and why a
+    step cannot be delivered at all (its steady input is beyond the limits)."""
+    source = None if step is None else "asked"
+    if not act.limited:
+        return step, source, None, None
+    if step is None:
+        step = _default_step(plant, act)
+        if step is None:
+            return None, None, None, None
+        source = f"steady input {_STEADY_FRACTION:.0%} of the limit"
+    g0 = _static_gain(plant)
+    if g0 is not None:
+        steady = [act.u0 + s / g0 for s in (step, -step)]
+        if not all(act.lo < u < act.hi for u in steady):
+            return step, source, None, (f"a step of {step:.4g} needs a steady input of {steady[0]:.4g}, beyond "
+                                        f"the limits [{act.lo:g}, {act.hi:g}]: no design can hold it")
+    return step, source, _Demand(step, act), None
+
+
+def _limit_notes(report: dict[str, Any], plant: _Plant, step: float | None, steady_note: str | None,
+                 max_overshoot: float | None, warns: list[str]) -> list[str]:
+    """Say what the limits did (``notes``); append to `warns` what the user must know (steps not delivered)."""
+    top = report.get("linear_step_max")
+    linear = f"steps up to {top:.3g} stay linear" if top is not None and math.isfinite(top) else ""
+    notes = []
+    if step is None:
+        notes.append(f"{plant.output} integrates {plant.input} (no static gain): no step is derived from the "
+                     f"limits; {linear or 'the input stays within them'}; give step= (--step) to design for a "
+                     "larger one")
+    elif steady_note is not None:
+        warns.append(f"{steady_note}; kept the linear design" + (f", {linear}" if linear else ""))
+    elif report.get("delivers_step") is False:
+        sat = report.get("step_overshoot_pct")
+        limit = f" and overshoot <= {max_overshoot:g} %" if max_overshoot is not None else ""
+        warns.append(f"no robust design delivers a step of {step:.4g} in {plant.output} within the limits{limit}; "
+                     "kept the linear design" + (f", whose step overshoots {sat:.1f} % with the limits"
+                                                 if sat is not None else "") + (f"; {linear}" if linear else ""))
+    return notes

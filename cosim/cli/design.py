@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import click
@@ -33,9 +34,15 @@ def _design_model(model_path: str, dt_text: str | None):
     if not model.is_linear:
         raise InvalidSettingError(f"{model_path} is nonlinear, and controllers are designed on a linear model; "
                                   "identify one with `cosim identify ... --library linear`")
-    dt = parse_number(dt_text, what="--dt") if dt_text else model.dt
-    if dt is None or not dt > 0:
-        raise InvalidSettingError("the model has no sample time; pass the controller's --dt (e.g. --dt 1/2257)")
+    if dt_text is not None:
+        dt = parse_number(dt_text, what="--dt")
+        if not (math.isfinite(dt) and dt > 0):
+            raise InvalidSettingError("--dt must be a positive sample time in seconds, e.g. --dt 1/2257 "
+                                      f"(got {dt_text})")
+    else:
+        dt = model.dt
+        if dt is None or not dt > 0:
+            raise InvalidSettingError("the model has no sample time; pass the controller's --dt (e.g. --dt 1/2257)")
     return to_statespace(model), float(dt), model
 
 
@@ -51,15 +58,84 @@ def _bounds(u_min: str | None, u_max: str | None) -> tuple[float | None, float |
 
 
 def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], list[str]]:
-    info = {k: v for k, v in controller.info.items()}
+    """The ``--json`` payload (every design figure) and the few lines printed without it."""
+    info = dict(controller.info)
     payload = {"kind": controller.kind, "dt": controller.dt, "inputs": list(controller.inputs),
                "outputs": list(controller.outputs), "tracked": list(controller.tracked), "info": info}
     if out:
         payload["file"] = str(controller.save(out))
-    lines = [f"{controller!r}"] + [f"  {k}: {v}" for k, v in info.items() if not isinstance(v, (dict, list))]
+    lines = _pid_lines(controller) if controller.kind == "pid" else _mpc_lines(controller)
     if out:
         lines.append(f"written: {out}")
     return payload, lines
+
+
+def _g(value: Any, digits: int = 3) -> str:
+    """A number to `digits` significant digits (``inf`` and missing ones in words)."""
+    if value is None:
+        return "n/a"
+    value = float(value)
+    return f"{value:.{digits}g}" if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+
+
+def _seconds(dt: float) -> str:
+    """A sample time as people write it: ``1/5000 s`` when it is one over a whole rate, else ``0.0002 s``."""
+    rate = 1.0 / dt
+    if abs(rate - round(rate)) <= 1e-6 * rate and round(rate) > 1:
+        return f"1/{round(rate)} s"
+    return f"{dt:.4g} s"
+
+
+def _limits(controller: Any) -> str:
+    parts = []
+    for name, lo, hi, du in zip(controller.inputs, controller.u_min, controller.u_max, controller.du_max,
+                                strict=True):
+        if math.isfinite(lo) or math.isfinite(hi):
+            parts.append(f"{name} in [{_g(lo, 4)}, {_g(hi, 4)}]")
+        if math.isfinite(du):
+            parts.append(f"|d{name}| <= {_g(du, 4)} per sample")
+    return ", ".join(parts) or "no input limits"
+
+
+def _pid_lines(pid: Any) -> list[str]:
+    i = pid.info
+    vel = f", velocity {i['velocity']}" if i.get("velocity") else ""
+    lines = [f"{i.get('structure', 'PID')} on {i.get('input')} -> {i.get('output')}{vel}; dt {_seconds(pid.dt)}; "
+             f"{_limits(pid)}",
+             f"  gains: kp {_g(pid.kp)}, ki {_g(pid.ki)}, kd {_g(pid.kd)}"
+             + (f", tf {_g(pid.tf)} s" if pid.tf else "") + f", b {_g(pid.b, 2)}",
+             f"  loop: crossover {_g(i.get('crossover_hz'))} Hz, phase margin {_g(i.get('phase_margin_deg'))} deg, "
+             f"gain margin {_g(i.get('gain_margin_db'))} dB, modulus margin {_g(i.get('modulus_margin'), 2)}"
+             + ("" if i.get("closed_loop_stable", True) else ", closed loop UNSTABLE")]
+    step = i.get("design_step")
+    figures = (f"overshoot {_g(i.get('step_overshoot_pct'), 2)} %, settling {_g(i.get('step_settling_time_s'))} s")
+    if step is not None and "step_overshoot_linear_pct" in i:
+        source = f" ({i['design_step_source']})" if i.get("design_step_source") not in (None, "asked") else ""
+        lines.append(f"  step {_g(step)}{source}, with the limits: {figures}; linear: overshoot "
+                     f"{_g(i.get('step_overshoot_linear_pct'), 2)} %, settling "
+                     f"{_g(i.get('step_settling_time_linear_s'))} s, up to steps of {_g(i.get('linear_step_max'))}")
+    else:
+        lines.append(f"  predicted step: {figures}")
+    lines += [f"  note: {note}" for note in i.get("notes", [])]
+    return lines
+
+
+def _mpc_lines(mpc: Any) -> list[str]:
+    i = mpc.info
+    radius = i.get("closed_loop_spectral_radius")
+    return [f"MPC on {', '.join(mpc.inputs)} -> {', '.join(mpc.tracked)} (measures {', '.join(mpc.outputs)}); "
+            f"dt {_seconds(mpc.dt)}; {_limits(mpc)}",
+            f"  horizon {mpc.horizon} moves ({_g(mpc.horizon * mpc.dt)} s); "
+            f"solver {i.get('solver_path', i.get('solver'))}",
+            f"  closed loop spectral radius {_g(radius, 4)}"
+            + (" (stable)" if radius is not None and radius < 1 else " (NOT stable)" if radius is not None else "")
+            + f", observer {_g(i.get('observer_spectral_radius'), 4)}"]
+
+
+def _warn(controller: Any) -> None:
+    """The design's warnings, one ``warning: ...`` line each on stderr."""
+    for text in controller.info.get("warnings") or []:
+        click.echo(f"warning: {' '.join(str(text).split())}", err=True)
 
 
 @design.command("pid")
@@ -78,18 +154,27 @@ def _design_summary(controller: Any, out: str | None) -> tuple[dict[str, Any], l
 @click.option("--u-min", default=None, help="Lower input limit (default: -u-max).")
 @click.option("--u-max", default=None, help="Upper input limit, e.g. 5000.")
 @click.option("--du-max", default=None, help="Largest input change per sample.")
+@click.option("--step", "step_text", default=None, metavar="R",
+              help="Set-point step the design must deliver through the input limits, in the tracked output's unit "
+                   "(default: the step whose steady input takes half the limit; none for an integrating plant). "
+                   "cosim validate steps by it by default.")
 @click.option("-o", "--output", "outputs", multiple=True, metavar="FILE",
               help="Write the controller JSON. (Before 0.2, --output named the tracked signal: a model output given "
                    "here is still read so, with a deprecation warning.)")
 @click.option("--out", "old_out", type=click.Path(dir_okay=False), default=None, hidden=True)
-@click.option("--json", "as_json", is_flag=True, help="Print the gains and margins as JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Print every design figure (gains, margins, steps) as JSON.")
 @_friendly
 def design_pid(model_path: str, input_name: str | None, output_name: str | None, velocity: str | None,
                dt_text: str | None,
                phase_margin: float | None, bandwidth_hz: float | None, gain_margin_db: float, no_derivative: bool,
-               u_min: str | None, u_max: str | None, du_max: str | None, outputs: tuple[str, ...],
-               old_out: str | None, as_json: bool) -> None:
+               u_min: str | None, u_max: str | None, du_max: str | None, step_text: str | None,
+               outputs: tuple[str, ...], old_out: str | None, as_json: bool) -> None:
     """Tune a discrete PID on the model for a phase margin or a bandwidth; report the margins achieved.
+
+    With input limits the design delivers a set-point step through them (--step, default the step whose steady
+    input takes half the limit): its predicted overshoot and settling are those of the loop with the limits.
+    Prints a short summary (structure, gains, margins, the step with and without the limits, warnings);
+    --json prints every figure.
 
     \b
     Example:
@@ -120,12 +205,17 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
         raise InvalidSettingError(f"one controller file, please: -o/--output was given {', '.join(files)}")
     out = files[0] if files else None
     lo, hi = _bounds(u_min, u_max)
-    pid = tune_pid(sys_c, dt=dt, input=input_name, output=output_name, velocity=velocity, phase_margin=phase_margin,
-                   bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
+    step = _limit(step_text, "--step")
+    if step is not None and not (math.isfinite(step) and step != 0):
+        raise InvalidSettingError(f"--step is the set-point step the design must deliver; give a non-zero number, "
+                                  f"e.g. --step 0.01 (got {step_text})")
+    pid = tune_pid(sys_c, dt=dt, input=input_name, tracked=output_name, velocity=velocity,
+                   phase_margin=phase_margin, bandwidth_hz=bandwidth_hz, gain_margin_db=gain_margin_db,
                    derivative=False if no_derivative else None, u_min=lo, u_max=hi,
-                   du_max=_limit(du_max, "--du-max"))
+                   du_max=_limit(du_max, "--du-max"), step=step)
     pid.design_model = DesignModel.from_statespace(sys_c, dt=dt)
     payload, lines = _design_summary(pid, out)
+    _warn(pid)
     _emit(as_json, payload, "\n".join(lines))
 
 
@@ -189,4 +279,5 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
               hard_state_bounds=hard_state_bounds, disturbance=None if disturbance == "none" else disturbance,
               codegen=not no_codegen, **weights)
     payload, lines = _design_summary(mpc, out)
+    _warn(mpc)
     _emit(as_json, payload, "\n".join(lines))

@@ -12,10 +12,16 @@
   ``metrics``, ``solve_time_us``); :meth:`Verdict.assert_passed` raises an ``AssertionError`` listing what
   failed, which pytest prints; :func:`assert_meets` does both in one call.
 
-Default specs for a telescope axis (:data:`TELESCOPE_SPECS`), for a 0.01 rad (34 arcmin) load-angle step at
-2257 Hz with the rated torque of 5000 N m: settling to 2 % within 1 s, overshoot at most 10 %, steady-state
-error at most 2e-5 rad (4 arcsec, averaged over the last 10 % of the run), the torque limit never exceeded.
-They are control specs only, so that a verdict does not depend on the machine's load: the controller's
+With no scenario or specs given, :func:`validate` takes them from the plant and the design
+(:func:`~cosim.loop.validation_defaults.default_checks`): for any FMU but the bundled servo a step of the
+controller's design step, its predicted settling time with a margin, 10 % overshoot, a steady-state error of 2 % of
+the step and the controller's input limit. A name set on the FMU that is not one of its parameters (a misspelt
+scenario key, ``duraton=2``) is refused before anything runs.
+
+Default specs for a telescope axis (:data:`TELESCOPE_SPECS`, the bundled servo's), for a 0.01 rad (34 arcmin)
+load-angle step at 2257 Hz with the rated torque of 5000 N m: settling to 2 % within 1 s, overshoot at most
+10 %, steady-state error at most 2e-5 rad (4 arcsec, averaged over the last 10 % of the run), the torque limit
+never exceeded. They are control specs only, so that a verdict does not depend on the machine's load: the controller's
 compute time is measured and reported (``solve_time_us``, ``deadline_miss_rate``), and becomes a verdict only
 when a timing spec is asked for (``deadline_miss_rate<=0``, ``solve_time_p99<=50us``; :data:`TIMING_SPECS`
 is a desktop's allowance). They are a small offset-pointing move of a telescope of this size; tighten them for
@@ -43,6 +49,7 @@ from ..errors import SpecError
 from ..numbers import parse_number
 from .closed_loop import ClosedLoopResult, closed_loop
 from .response import jsonable_metrics
+from .validation_defaults import TELESCOPE_SPECS, check_parameter_names, default_checks
 
 __all__ = [
     "KNOWN_METRICS",
@@ -62,7 +69,6 @@ __all__ = [
 ]
 
 SCENARIO_KINDS = ("step", "ramp", "disturbance")
-TELESCOPE_SPECS = ("settling_time<=1.0", "overshoot<=10%", "steady_state_error<=2e-5", "input_limit<=5000")
 #: A timing allowance for a desktop OS that preempts now and then (a real-time target would ask for 0).
 TIMING_SPECS = ("deadline_miss_rate<=0.001",)
 #: Figures a spec can name (ClosedLoopResult.metrics); the response's may be prefixed by a tracked signal's name.
@@ -346,6 +352,25 @@ class Verdict:
     def __bool__(self) -> bool:
         return self.passed
 
+    def __repr__(self) -> str:
+        failed = sum(c["passed"] is False for c in self.checks)
+        return (f"Verdict(passed={self.passed}, checks={len(self.checks)}, failed={failed}, "
+                f"scenarios={[s.name for s in self.scenarios]})")
+
+    def __str__(self) -> str:
+        """PASSED or FAILED, each check with its value and limit, the reasons, the compute time; no trajectories."""
+        judged = [c for c in self.checks if c["passed"] is not None]
+        solve = self.solve_time_us()
+        lines = [f"{'PASSED' if self.passed else 'FAILED'}: {sum(bool(c['passed']) for c in judged)} of "
+                 f"{len(judged)} checks met in {len(self.scenarios)} scenario(s); controller compute per call "
+                 f"median {solve['median']:.3g} µs, p99 {solve['p99']:.3g} µs"]
+        for c in self.checks:
+            value = "n/a" if c["passed"] is None else ("undefined" if c["value"] is None else f"{c['value']:.4g}")
+            mark = "n/a" if c["passed"] is None else ("met" if c["passed"] else "NOT MET")
+            lines.append(f"  [{c['scenario']}] {c['spec']}: {value} (limit {c['limit']:g}) {mark}")
+        lines += [f"  reason: {r}" for r in self.reasons]
+        return "\n".join(lines)
+
     @property
     def metrics(self) -> dict[str, Any]:
         """The figures: the one scenario's metrics, or one dictionary per scenario name."""
@@ -406,20 +431,25 @@ def _as_scenarios(scenarios: Scenario | str | Iterable[Scenario | str]) -> list[
 _STOPS = ("controller_error", "plant_error", "terminated")
 
 
-def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Scenario | str],
-             specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, parameters: Mapping[str, float] | None = None,
+def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Scenario | str] | None = None,
+             specs: Iterable[Spec | str] | None = None, *, parameters: Mapping[str, float] | None = None,
              model: Any = "design", progress: bool | None = None, kind: str | None = None) -> Verdict:
     """Run `controller` against the FMU in every scenario and check every spec.
+
+    Every FMU parameter the scenarios and `parameters` set is checked first: a name that is not one (a
+    misspelt scenario key) is refused in one line before anything runs.
 
     Parameters
     ----------
     fmu : path-like or FmuPlant
         The plant FMU.
     controller : controllers.base.Controller
-    scenarios : Scenario, str, or a sequence of them
-        Strings are read by :func:`parse_scenario`.
-    specs : sequence of Spec or str
-        Read by :func:`parse_spec`; default :data:`TELESCOPE_SPECS`.
+    scenarios : Scenario, str, or a sequence of them, optional
+        Strings are read by :func:`parse_scenario`; default the plant's and design's
+        (:func:`~cosim.loop.validation_defaults.default_checks`: the telescope's 0.01 rad step on the bundled servo).
+    specs : sequence of Spec or str, optional
+        Read by :func:`parse_spec`; default the plant's and design's (:data:`TELESCOPE_SPECS` on the bundled
+        servo; see :func:`~cosim.loop.validation_defaults.default_checks`).
     parameters : mapping, optional
         FMU parameters for every scenario (a scenario's own win), e.g. ``{"Fc": 100.0}``.
     model : "design", None or a model
@@ -441,8 +471,13 @@ def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Sce
     >>> verdict.passed, verdict.reasons[0].split("] ")[1].split(":")[0]
     (False, 'settling_time<=10ms')
     """
-    items = _as_scenarios(scenarios)
+    defaults = default_checks(fmu, controller, kind=kind) if scenarios is None or specs is None else None
+    items = _as_scenarios(defaults.scenario if scenarios is None else scenarios)
+    if specs is None:
+        steps = [abs(s.amplitude) for s in items if s.kind != "disturbance"]
+        specs = defaults.specs if scenarios is None else default_checks(fmu, controller, kind=kind, steps=steps).specs
     spec_list = [parse_spec(s) for s in specs]
+    check_parameter_names(fmu, items, parameters, kind=kind)
     results, checks, reasons, notes = [], [], [], []
     for scenario in items:
         params = {**(parameters or {}), **scenario.parameters}
@@ -475,7 +510,7 @@ def validate(fmu: Any, controller: Any, scenarios: Scenario | str | Iterable[Sce
                    scenarios=tuple(items), notes=tuple(notes))
 
 
-def assert_meets(fmu: Any, controller: Any, scenarios: Any, specs: Sequence[Spec | str] = TELESCOPE_SPECS,
+def assert_meets(fmu: Any, controller: Any, scenarios: Any = None, specs: Sequence[Spec | str] | None = None,
                  **options: Any) -> Verdict:
     """:func:`validate`, then :meth:`Verdict.assert_passed`: a one-line closed-loop check for pytest.
 

@@ -1,10 +1,14 @@
 """Robustness: Monte Carlo validation of a controller over the plant's parameters and undeclared effects.
 
 Each sample draws the plant's physical parameters uniformly within ``±spread`` of their nominal values (the
-FMU's start values; by default the two-mass servo's inertias, stiffness and damping) and each effect's
-parameter uniformly in its range (``effects={"Fc": (0, 200)}``), runs :func:`cosim.loop.validation.validate` on
-the FMU with them, and records pass or fail with the figures. The samples run through the sweep engine
-(:func:`cosim.study.sweep.run_sweep`): local processes or a Dask cluster. A sample that raises counts as a failure.
+values the run sets, ``parameters=``, else the FMU's start values) and each effect's parameter uniformly in its
+range (``effects={"Fc": (0, 200)}``), runs :func:`cosim.loop.validation.validate` on the FMU with them, and
+records pass or fail with the figures. The parameters varied by default (:func:`robustness_plan`): the bundled
+two-mass servo's inertias, stiffness and damping (:data:`DEFAULT_UNCERTAIN`) where the FMU has them all, else
+every real parameter of the FMU (each element of an array parameter, ``A[1,2]``) whose value is not zero; a
+name that is not a real parameter is refused in one line listing the FMU's parameters. The samples run through
+the sweep engine (:func:`cosim.study.sweep.run_sweep`): local processes or a Dask cluster. A sample that
+raises counts as a failure.
 
 The **worst case** is the sample that comes closest to (or goes furthest beyond) a spec limit: for each
 ``metric <= limit`` spec, the ratio ``value / limit`` (for ``>=``, ``limit / value``); the sample with the
@@ -35,11 +39,13 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InvalidSettingError, UnknownVariableError
-from ..loop.validation import TELESCOPE_SPECS, Scenario, Spec, parse_scenario, parse_spec, validate
+from ..loop.validation import Scenario, Spec, parse_scenario, parse_spec, validate
+from ..loop.validation_defaults import default_checks, fmu_parameters
+from ..plant._variables import array_value, element_name, expand_signals, shape_of
 from ..plant.model_description import open_model_description
 from .sweep import SweepResult, run_sweep
 
-__all__ = ["DEFAULT_UNCERTAIN", "RobustnessResult", "robustness"]
+__all__ = ["DEFAULT_UNCERTAIN", "RobustnessPlan", "RobustnessResult", "robustness", "robustness_plan"]
 
 #: Parameters of the bundled plant varied by default: inertias, stiffness and damping.
 DEFAULT_UNCERTAIN = ("Jm", "JL", "KL", "Bm", "BL")
@@ -114,9 +120,11 @@ def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[s
     from controllers.base import controller_from_json
 
     ctrl = controller_from_json(controller)
-    # the drawn plant wins over a scenario's own parameters; the scenario keeps its name (the table's columns)
-    runs = [replace(Scenario.from_dict(s), parameters={**s.get("parameters", {}), **parameters}, name=s["name"])
-            for s in scenarios]
+    # the drawn plant wins over a scenario's own parameters (a drawn array over the scenario's elements of it); the
+    # scenario keeps its name (the table's columns)
+    runs = [replace(Scenario.from_dict(s), name=s["name"], parameters={
+        **{k: v for k, v in s.get("parameters", {}).items() if k.partition("[")[0] not in parameters},
+        **parameters}) for s in scenarios]
     verdict = validate(fmu, ctrl, runs, specs, model=None, progress=False, kind=kind)
     metrics: dict[str, Any] = {}
     for check in verdict.checks:
@@ -128,27 +136,149 @@ def robustness_case(fmu: str, controller: dict[str, Any], scenarios: list[dict[s
             "score": score if math.isfinite(score) else None}
 
 
-def _nominal(fmu: str, names: Iterable[str]) -> dict[str, float]:
-    variables = {v.name: v for v in open_model_description(fmu).modelVariables}
-    nominal = {}
+@dataclass(frozen=True)
+class RobustnessPlan:
+    """What a Monte Carlo varies: ``nominal`` values of the spread parameters and ``ranges`` of the effects, by
+    scalar or array-element name, and the whole arrays they belong to (``arrays``, row-major values and shape),
+    so that a draw sets each array whole."""
+
+    nominal: dict[str, float]
+    ranges: dict[str, tuple[float, float]]
+    arrays: dict[str, tuple[list[float], tuple[int, ...]]]
+
+    def fmu_values(self, draw: Mapping[str, float]) -> dict[str, Any]:
+        """A draw (by scalar or element name) as the FMU's parameters: scalars, and each touched array whole."""
+        out: dict[str, Any] = {}
+        for name, value in draw.items():
+            base = name.partition("[")[0]
+            if base in self.arrays and "[" in name:
+                flat, shape = self.arrays[base]
+                current = out.get(base)
+                values = list(flat) if current is None else current
+                index = tuple(int(i) - 1 for i in name[len(base) + 1:-1].split(","))
+                values[int(np.ravel_multi_index(index, shape))] = float(value)
+                out[base] = values
+            else:
+                out[name] = float(value)
+        for base, values in list(out.items()):
+            if base in self.arrays and isinstance(values, list):
+                out[base] = np.reshape(values, self.arrays[base][1]).tolist()
+        return out
+
+
+def _real_values(fmu: str, given: Mapping[str, Any], kind: str | None) -> tuple[dict[str, float], dict[str, Any],
+                                                                             list[str]]:
+    """Every real parameter's value by scalar or element name (the `given` one, else the start value), the
+    array parameters' flat values and shapes, and the FMU's parameter names (all types)."""
+    md = open_model_description(fmu, kind)
+    names = fmu_parameters(md)
+    variables = {v.name: v for v in md.modelVariables}
+    starts = {v.name: v.start for v in md.modelVariables}
+    values: dict[str, float] = {}
+    arrays: dict[str, tuple[list[float], tuple[int, ...]]] = {}
     for name in names:
-        if name not in variables:
-            raise UnknownVariableError(f"{Path(fmu).name} has no parameter {name!r} to vary; "
-                                       f"its parameters include {sorted(variables)[:12]}")
-        start = variables[name].start
-        try:
-            nominal[name] = float(start)
-        except (TypeError, ValueError):
-            raise InvalidSettingError(f"parameter {name!r} has no numeric start value to vary around") from None
-    return nominal
+        var = variables[name]
+        if var.type not in ("Real", "Float64", "Float32"):
+            continue
+        if getattr(var, "dimensions", None):
+            shape = shape_of(var, {**starts, **given})
+            size = int(np.prod(shape))
+            if name in given:
+                flat = [float(v) for v in array_value(expand_signals([var, *[d.variable for d in var.dimensions
+                                                                              if d.variable is not None]])[name],
+                                                      given[name])]
+            else:
+                text = str(var.start or "").split()
+                flat = [float(v) for v in text] if len(text) == size else [0.0] * size
+            for offset, index in enumerate(np.ndindex(*shape)):
+                element = element_name(name, index)
+                flat[offset] = float(given.get(element, flat[offset]))
+                values[element] = flat[offset]
+            arrays[name] = (flat, tuple(shape))
+        else:
+            try:
+                values[name] = float(given.get(name, var.start))
+            except (TypeError, ValueError):
+                continue
+    return values, arrays, names
 
 
-def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | str | Iterable[Scenario | str],
-               specs: Iterable[Spec | str] = TELESCOPE_SPECS, *, samples: int = 50, spread: float = 0.2,
-               uncertain: Sequence[str] = DEFAULT_UNCERTAIN,
-               effects: Mapping[str, tuple[float, float]] | None = None, seed: int = 0,
-               scheduler: Any = None, workers: int | None = None, progress: bool | None = None,
-               kind: str | None = None) -> RobustnessResult:
+def robustness_plan(fmu: str | os.PathLike, *, spread: float = 0.2, uncertain: Sequence[str] | None = None,
+                    effects: Mapping[str, tuple[float, float]] | None = None,
+                    parameters: Mapping[str, Any] | None = None, kind: str | None = None) -> RobustnessPlan:
+    """The parameters a Monte Carlo spreads and their nominal values, the effects' ranges; bad names refused.
+
+    Parameters
+    ----------
+    fmu : path-like
+    spread : float
+        Relative half-width of the draws, in [0, 1).
+    uncertain : sequence of str, optional
+        Real parameters to spread (an array's name stands for its elements); default :data:`DEFAULT_UNCERTAIN`
+        where the FMU has them all, else every real parameter (array elements too) whose value is not zero.
+    effects : mapping of name to (low, high), optional
+    parameters : mapping, optional
+        Values the runs set (``--set``): the nominal values of the spread parameters where given.
+    kind : {"cs", "me"}, optional
+
+    Returns
+    -------
+    RobustnessPlan
+
+    Examples
+    --------
+    >>> from cosim import build_fmu
+    >>> plan = robustness_plan(build_fmu(), parameters={"Jm": 300.0})
+    >>> plan.nominal
+    {'Jm': 300.0, 'JL': 1000.0, 'KL': 2500000.0, 'Bm': 50.0, 'BL': 500.0}
+    """
+    if not (isinstance(spread, (int, float)) and 0 <= spread < 1):
+        raise InvalidSettingError(f"spread is a fraction in [0, 1), got {spread!r}")
+    fmu = str(Path(fmu))
+    label = Path(fmu).name
+    values, arrays, names = _real_values(fmu, dict(parameters or {}), kind)
+    real = [n for n in names if n in values or n in arrays]
+
+    def pick(name: str, role: str) -> list[str]:
+        if name in values:
+            return [name]
+        if name in arrays:
+            return [e for e in values if e.partition("[")[0] == name]
+        import difflib
+
+        near = difflib.get_close_matches(name, real, n=1)
+        listed = ", ".join(real[:40]) + (" ..." if len(real) > 40 else "") if real else "none"
+        hint = f"; did you mean {near[0]}?" if near else ""
+        raise UnknownVariableError(f"{label} has no real parameter {name!r} to {role}{hint} (its real parameters: "
+                                   f"{listed})")
+
+    if uncertain is None:
+        chosen = (list(DEFAULT_UNCERTAIN) if all(n in values for n in DEFAULT_UNCERTAIN)
+                  else [n for n, v in values.items() if v != 0.0 and math.isfinite(v)])
+        if not chosen:
+            what = ("declares no real parameter" if not real else
+                    f"has no real parameter with a non-zero value ({', '.join(real[:40])})")
+            raise InvalidSettingError(f"{label} {what}: nothing to spread around; name parameters with --vary "
+                                      "NAME,... (or vary=...), or validate without --robustness")
+    else:
+        chosen = [e for name in uncertain for e in pick(str(name), "vary")]
+    ranges: dict[str, tuple[float, float]] = {}
+    for name, bounds in dict(effects or {}).items():
+        for element in pick(str(name), "vary as an effect"):
+            if len(bounds) != 2 or not bounds[0] <= bounds[1]:
+                raise InvalidSettingError(f"effect range for {name!r} must be (low, high) with low <= high, "
+                                          f"got {bounds}")
+            ranges[element] = (float(bounds[0]), float(bounds[1]))
+    nominal = {name: values[name] for name in chosen if name not in ranges}
+    return RobustnessPlan(nominal=nominal, ranges=ranges, arrays=arrays)
+
+
+def robustness(fmu: str | os.PathLike, controller: Any,
+               scenarios: Scenario | str | Iterable[Scenario | str] | None = None,
+               specs: Iterable[Spec | str] | None = None, *, samples: int = 50, spread: float = 0.2,
+               uncertain: Sequence[str] | None = None, effects: Mapping[str, tuple[float, float]] | None = None,
+               parameters: Mapping[str, Any] | None = None, seed: int = 0, scheduler: Any = None,
+               workers: int | None = None, progress: bool | None = None, kind: str | None = None) -> RobustnessResult:
     """Validate `controller` on `samples` plants drawn around the nominal one; pass rate and worst case.
 
     Parameters
@@ -158,15 +288,19 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
     controller : controllers.base.Controller
         Sent to the workers as JSON and rebuilt there.
     scenarios, specs
-        As for :func:`cosim.loop.validation.validate`.
+        As for :func:`cosim.loop.validation.validate` (default: the plant's and design's).
     samples : int
         Number of Monte Carlo samples.
     spread : float
         Relative half-width of the uniform draw of each `uncertain` parameter (0.2 = ±20 %).
-    uncertain : sequence of str
-        FMU parameters drawn around their start values.
+    uncertain : sequence of str, optional
+        FMU parameters drawn around their nominal values (an array's name: its elements); default: see
+        :func:`robustness_plan`.
     effects : mapping of name to (low, high), optional
         Effect parameters drawn uniformly in a range, e.g. ``{"Fc": (0.0, 200.0)}``.
+    parameters : mapping, optional
+        FMU parameters every run sets (``--set``; a scenario's own still apply): the nominal values of the
+        spread parameters where given.
     seed : int
         Seed of the draws (the same seed gives the same plants wherever the samples run).
     scheduler, workers
@@ -183,19 +317,21 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
     """
     if not isinstance(samples, int) or samples < 1:
         raise InvalidSettingError(f"samples must be a positive whole number, got {samples!r}")
-    if not (isinstance(spread, (int, float)) and 0 <= spread < 1):
-        raise InvalidSettingError(f"spread is a fraction in [0, 1), got {spread!r}")
+    plan = robustness_plan(fmu, spread=spread, uncertain=uncertain, effects=effects, parameters=parameters,
+                           kind=kind)
     fmu = str(Path(fmu))
+    if scenarios is None or specs is None:
+        defaults = default_checks(fmu, controller, kind=kind)
+        scenarios = defaults.scenario if scenarios is None else scenarios
+        specs = defaults.specs if specs is None else specs
     scenario_list = [s if isinstance(s, Scenario) else parse_scenario(s)
                      for s in ([scenarios] if isinstance(scenarios, (Scenario, str)) else scenarios)]
+    if parameters:
+        scenario_list = [s.with_effects(**{k: v for k, v in parameters.items() if k not in s.parameters})
+                         for s in scenario_list]
     spec_texts = [parse_spec(s).text or f"{parse_spec(s).metric}{parse_spec(s).op}{parse_spec(s).limit!r}"
                   for s in specs]
-    nominal = _nominal(fmu, uncertain)
-    ranges = dict(effects or {})
-    _nominal(fmu, ranges)  # the effects must exist too
-    for name, bounds in ranges.items():
-        if len(bounds) != 2 or not bounds[0] <= bounds[1]:
-            raise InvalidSettingError(f"effect range for {name!r} must be (low, high) with low <= high, got {bounds}")
+    nominal, ranges = plan.nominal, plan.ranges
     rng = np.random.default_rng(seed)
     draws = []
     for _ in range(samples):
@@ -204,7 +340,8 @@ def robustness(fmu: str | os.PathLike, controller: Any, scenarios: Scenario | st
         draws.append(params)
     payload = controller.to_dict()
     cases = [{"fmu": fmu, "controller": payload, "scenarios": [s.to_dict() for s in scenario_list],
-              "specs": spec_texts, "parameters": params, **({"kind": kind} if kind else {})} for params in draws]
+              "specs": spec_texts, "parameters": plan.fmu_values(params), **({"kind": kind} if kind else {})}
+             for params in draws]
     sweep = run_sweep(robustness_case, cases, scheduler=scheduler, workers=workers, progress=progress,
                       desc="robustness")
     rows = []
