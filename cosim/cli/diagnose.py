@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import click
@@ -75,6 +76,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     from ..identify.sindyc import SINDYc
     from .identify import format_kinematics
 
+    started = time.perf_counter()
     check_outputs({"--report": [report_path], "-o/--output": [out]},
                   {"--report": (".html", ".htm"), "-o/--output": (".json",)})  # before anything runs
     state_names, input_specs = _names(states, "--state"), _names(inputs, "--input")
@@ -104,7 +106,9 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                       max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor)
     payload = report.to_dict()
     if report_path:
-        payload["report"] = str(report.write_report(report_path))
+        payload["report"] = str(report.write_report(
+            report_path, seconds=time.perf_counter() - started, records=records,
+            model_from=f"from {Path(model_path).name}" if model_path else "linear SINDYc identified from the data"))
     if out:
         payload["model"] = str(report.model_after.save(out))
     lines = [report.message] + ([found_rows] if found_rows else [])

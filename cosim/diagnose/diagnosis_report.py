@@ -21,7 +21,7 @@ import numpy as np
 from ..data.trajectory import Trajectory
 from ..identify.metrics import max_deviation_pct, nrmse_fit_pct, r2
 from ..identify.model import IdentifiedModel
-from ..report import Report, html_table
+from ..report import Report, html_table, step_text
 from ._holdout import HELD_OUT_T
 from .candidates import EffectCandidate
 from .residuals import ResidualAnalysis
@@ -191,12 +191,69 @@ class DiagnosisReport:
         return (f"<div>{html_table(effects, caption='Diagnosis: ' + self.message)}"
                 f"{html_table(errors, caption='free-run error against the data', highlight=marks)}</div>")
 
-    def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis") -> Path:
-        """One HTML file: the verdict, the ranking, the parameters, before/after figures and the plots."""
+    def write_report(self, path: str | os.PathLike, *, title: str = "Diagnosis", seconds: float | None = None,
+                     records: Sequence[Trajectory] | None = None, model_from: str = "",
+                     against: str = "the data") -> Path:
+        """One HTML file: the summary box (:meth:`summary`), the effects, the ranking, the parameters,
+        before/after figures and the plots.
+
+        Parameters
+        ----------
+        path : path-like
+            The HTML file (PNG plots beside it, named after it).
+        title : str
+        seconds, records, model_from, against
+            For the summary box: see :meth:`summary`.
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         report = Report(title, subtitle=self.message)
+        report.add_summary(**self.summary(records, seconds=seconds, model_from=model_from, against=against))
         self.add_to_report(report, path.with_suffix(""))
         return report.write(path)
+
+    def summary(self, records: Sequence[Trajectory] | None = None, *, seconds: float | None = None,
+                model_from: str = "", against: str = "the data") -> dict[str, Any]:
+        """The facts a report opens with (keyword arguments of :func:`cosim.report.summary_box`): the plant and
+        the data (from the records' files and metadata), the model diagnosed, the effects found with their
+        parameters ± standard error (or why none), the free-run NRMSE before and after per state, the time.
+
+        Parameters
+        ----------
+        records : sequence of Trajectory, optional
+            The records diagnosed, as read (their ``meta`` names the file, the FMU that made them, the noise
+            added); default: :attr:`data`.
+        seconds : float, optional
+            How long the diagnosis took, measured where it ran.
+        model_from : str
+            Where the model diagnosed came from (a file, "identified from the data"...).
+        against : str
+            What the free-run errors are measured against.
+
+        Returns
+        -------
+        dict
+        """
+        records = list(records) if records is not None else [self.data] if self.data is not None else []
+        plant, data = _plant_and_data(records, self.model_before, self.analysis)
+        model = self.model_before
+        context = [("Model", (f"{model_from}: " if model_from else "")
+                    + f"{len(model.states)} states ({', '.join(model.states)}), inputs {', '.join(model.inputs)}, "
+                    f"{int(np.count_nonzero(model.coef))} terms")]
+        errors = {label: {**{k: v["nrmse_pct"] for k, v in figures.get("per_state", {}).items()},
+                          "mean": figures.get("nrmse_pct")} for label, figures in (("before", self.before),
+                                                                                   ("after", self.after))}
+        more = []
+        if self.rejected:
+            more.append(("Not claimed", "; ".join(f"{c.name} on {c.attached_to}" for c in self.rejected)
+                         + ": better on the data fitted to, not on held-out data"))
+        return {"plant": plant, "data": data, "context": context, "effects": [e.to_dict() for e in self.effects],
+                "no_effect": self.message.removeprefix("no effect found: "), "errors": errors,
+                "error_label": f"free-run NRMSE, % of each state's spread, against {against} (lower is better)",
+                "more": more, "seconds": seconds}
 
     def _rate_note(self) -> str:
         """A caption's note of the step the search ran at, when it is not the record's ("" otherwise)."""
@@ -266,6 +323,45 @@ class DiagnosisReport:
                 report.add_figure(heading, pngs[-1], caption=caption)
         report.add_text("Equations after", "\n\n".join(self.model_after.equations()))
         return pngs
+
+
+# ---------------------------------------------------------------------------------------------- summary
+def _plant_and_data(records: Sequence[Trajectory], model: IdentifiedModel,
+                    analysis: Mapping[str, Any]) -> tuple[str | None, str | None]:
+    """The summary's plant (the FMU that made the data, or the measured data's file) and data (files, samples,
+    duration, step, noise: as added when the record says so, else estimated per state)."""
+    from ._free_run import noise_level
+
+    if not records:
+        return None, None
+    meta = records[0].meta or {}
+    files = [Path(str((r.meta or {}).get("data_file", {}).get("file", ""))).name for r in records]
+    if meta.get("source") == "fmu" and meta.get("fmu"):
+        kind = {"cs": "co-simulation", "me": "Model Exchange"}.get(meta.get("kind"), meta.get("kind"))
+        version = f"FMI {meta['fmi_version']}" if meta.get("fmi_version") else None
+        what = ", ".join(str(x) for x in (meta.get("model"), version, kind) if x)
+        plant = f"{meta['fmu']} ({what}), simulated by cosim"
+    else:
+        plant = "measured data" + (f": {', '.join(f for f in files if f)}" if any(files) else "") + \
+            " (no plant model: the diagnosis reads the data alone)"
+    parts = []
+    for name, r in zip(files, records, strict=True):
+        span = float(r.time[-1] - r.time[0])
+        parts.append(f"{name + ': ' if name else ''}{len(r)} samples, {span:.4g} s at {step_text(r.dt)}")
+    if len(parts) > 3:
+        parts = [*parts[:2], f"... {len(parts)} records, {sum(len(r) for r in records)} samples in all"]
+    noise = meta.get("noise") if isinstance(meta.get("noise"), Mapping) else None
+    if noise and "level" in noise:
+        parts.append(f"noise {noise['level'] * 100:.3g} % of each signal's std, added (seed {noise.get('seed')})")
+    else:
+        first = records[0]
+        levels = {s: noise_level(first[s]) / np.std(first[s]) * 100 for s in model.states
+                  if s in first.names and np.std(first[s]) > 0}
+        parts.append("noise, estimated from second differences, % of each state's std: "
+                     + ", ".join(f"{s} {v:.2g}" for s, v in levels.items()))
+    if analysis.get("decimation", 1) > 1:
+        parts.append(f"searched at {1.0 / analysis['dt']:.4g} Hz (decimated by {analysis['decimation']})")
+    return plant, "; ".join(parts)
 
 
 # ---------------------------------------------------------------------------------------------- figures
