@@ -141,25 +141,31 @@ def fmu_source_dir(name: str = _DEFAULT_NAME) -> pathlib.Path:
 
 
 def build_fmu(
-    name: str = _DEFAULT_NAME,
+    name: str | None = None,
     *,
     fmi_version: str = "2.0",
     cache_dir: str | os.PathLike[str] | None = None,
     force: bool = False,
+    source: str | os.PathLike[str] | None = None,
 ) -> pathlib.Path:
-    """Build a bundled FMU from its C source (once) and return the path of the FMU file.
+    """Build a bundled FMU, or any source folder laid out as one, from its C source (once); return the FMU's path.
 
     Parameters
     ----------
-    name : str
-        Name of the bundled FMU (a folder of ``fmus/``), default ``"two_mass_servo"``.
+    name : str, optional
+        Name of the bundled FMU (a folder of ``fmus/``), default ``"two_mass_servo"``; with `source`, the name
+        of the FMU file (default: the folder's name).
     fmi_version : str
-        ``"2.0"`` or ``"3.0"`` (``"2"`` and ``"3"`` are accepted too). Both are
-        Co-Simulation FMUs built from the same model core.
+        ``"2.0"`` or ``"3.0"`` (``"2"`` and ``"3"`` are accepted too), built from the same model core with
+        that version's wrapper and model description (which say whether it is Co-Simulation, Model
+        Exchange or both).
     cache_dir : str or os.PathLike, optional
         Root of the cache; default :func:`fmu_cache_dir`.
     force : bool
         Rebuild even if the cache already holds this build.
+    source : str or os.PathLike, optional
+        A folder holding the C source and model descriptions (the layout of the module docstring), instead of
+        a bundled FMU: an FMU of one's own, or a test's (``tests/fmus/sliding_mass``).
 
     Returns
     -------
@@ -173,7 +179,7 @@ def build_fmu(
         FMI headers are missing from fmpy, or the compiler reports errors (their first
         lines are in the message).
     FmuNotFoundError
-        If there is no bundled FMU of that name.
+        If there is no bundled FMU of that name, or `source` is not a folder with a ``modelDescription.xml``.
     InvalidSettingError
         If ``fmi_version`` is not 2.0 or 3.0.
 
@@ -186,7 +192,16 @@ def build_fmu(
     '3.0'
     """
     version = _parse_fmi_version(fmi_version)
-    src = fmu_source_dir(name)
+    if source is None:
+        name = _DEFAULT_NAME if name is None else name
+        src = fmu_source_dir(name)
+    else:
+        src = pathlib.Path(source).expanduser().absolute()
+        if not (src / _DESCRIPTIONS[2]).is_file():
+            raise FmuNotFoundError(f"{src} is no FMU source folder: it has no {_DESCRIPTIONS[2]}; give the folder "
+                                   f"holding the C source and the model descriptions")
+        name = src.name if name is None else name
+        _check_name(name)
     description = src / _DESCRIPTIONS[version]
     wrapper = src / _WRAPPERS[version]
     for needed in (description, wrapper):
