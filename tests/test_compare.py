@@ -133,7 +133,7 @@ def test_simulate_input_file_interpolates_when_asked_and_refuses_what_it_cannot_
     out = runner.invoke(main, ["simulate", str(fmu), "--input-file", str(tmp_path / "u.csv"), "--hold", "linear",
                                "--dt", "0.005", "-o", str(tmp_path / "r.csv")])
     assert out.exit_code == 0, out.output
-    assert "interpolated linearly; TL at their start values" in out.stdout
+    assert "interpolated linearly; drove Tm; left TL to the FMU (start 0)" in out.stdout
     np.testing.assert_allclose(pd.read_csv(tmp_path / "r.csv")["Tm"], np.linspace(0.0, 100.0, 21), atol=1e-9)
     for args, message in [(["--duration", "1"], "reaches outside the recorded inputs"),
                           (["--input", "Tm=1"], "input Tm is given by --input and by --input-file")]:

@@ -87,9 +87,10 @@ def test_step_refuses_a_nonfinite_input_naming_it_and_the_time(fmu, bad):
 def test_simulate_returns_inputs_states_units_and_meta(fmu):
     traj = simulate(fmu, {"Tm": "square:amp=500,freq=2"}, duration=1.0, dt=1e-3, parameters={"Fc": 10.0})
     assert len(traj) == 1001
-    assert traj.inputs == ("Tm", "TL") and traj.states == ("theta_m", "omega_m", "theta_L", "omega_L")
+    # only the input driven is recorded; TL, which nobody drives, is left to the FMU and listed with its start value
+    assert traj.inputs == ("Tm",) and traj.states == ("theta_m", "omega_m", "theta_L", "omega_L")
     assert set(np.unique(traj["Tm"])) == {-500.0, 500.0}  # 10 % of the declared max torque 5000 N m
-    assert np.all(traj["TL"] == 0.0)
+    assert traj.meta["left_inputs"] == {"TL": 0.0}
     assert traj.units[traj.names.index("omega_m")] == "rad/s"
     assert traj.meta["parameters"]["Fc"] == 10.0 and traj.meta["dt"] == 1e-3
     np.testing.assert_allclose(np.diff(traj.time), 1e-3, rtol=1e-9)
@@ -347,11 +348,11 @@ def test_each_plant_gets_its_own_fmu_messages(fmu):
 def test_any_float_variable_can_be_recorded_not_only_outputs(fmu):
     """Issue 15: a state or local variable the FMU does not declare as an output (here the derivatives)."""
     traj = simulate(fmu, {"Tm": 1000.0}, duration=0.01, dt=1e-3, outputs=["omega_m", "der_theta_m", "der_omega_m"])
-    assert traj.names == ("Tm", "TL", "omega_m", "der_theta_m", "der_omega_m")
+    assert traj.names == ("Tm", "omega_m", "der_theta_m", "der_omega_m")
     np.testing.assert_array_equal(traj["der_theta_m"], traj["omega_m"])  # theta_m' = omega_m, at every sample
     assert np.all(traj["der_omega_m"][1:] > 0)  # a positive torque from rest accelerates the motor
     every = simulate(fmu, {"Tm": 1000.0}, duration=0.01, dt=1e-3, outputs="all")
     assert {"theta_L", "der_omega_L", "KL"} <= set(every.names) and "time" not in every.names
-    assert simulate(fmu, duration=0.01, dt=1e-3).names == ("Tm", "TL", "theta_m", "omega_m", "theta_L", "omega_L")
+    assert simulate(fmu, duration=0.01, dt=1e-3).names == ("theta_m", "omega_m", "theta_L", "omega_L")
     with pytest.raises(UnknownVariableError, match="has no variable named 'der_omega_x'"):
         FmuPlant(fmu, dt=1e-3, outputs=["der_omega_x"])

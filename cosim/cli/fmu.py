@@ -39,23 +39,36 @@ def fmu_build(fmi_version: str, force: bool, as_json: bool) -> None:
 @click.argument("path")
 @click.option("--all", "show_all", is_flag=True,
               help="Also list the local variables (what `cosim simulate --record` can record beside the outputs).")
+@click.option("--input", "-i", "inputs", multiple=True, metavar="NAME[=SPEC]",
+              help="An input a run would drive, as `cosim simulate --input` gives it: the inputs are then listed as "
+                   "driven or left to the FMU.")
+@click.option("--input-file", "input_file", type=click.Path(dir_okay=False), default=None, metavar="DATA",
+              help="A file a run would take inputs from, as `cosim simulate --input-file`: its columns named as "
+                   "inputs are driven.")
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 @_friendly
-def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
+def fmu_info(path: str, show_all: bool, inputs: tuple[str, ...], input_file: str | None, as_json: bool) -> None:
     """Describe an FMU: inputs, outputs, states, parameters with units and start values.
 
     PATH is an .fmu file, or `bundled` for the bundled servo.
+
+    A run drives only the inputs it is given (--input, --input-file, a controller's inputs, a disturbance); the
+    others are left to the FMU after their start values, as FMPy leaves them. With --input/--input-file, the
+    inputs are listed as driven or left, as `cosim simulate` would run them.
 
     \b
     Example:
       cosim fmu info bundled
       cosim fmu info bundled --all --json
+      cosim fmu info model.fmu --input-file force.csv
     """
-    from ..plant._variables import shape_of
+    from ..plant._variables import NUMERIC, expand_signals, shape_of
     from ..plant.model_description import open_model_description
 
     fmu_path = _resolve_fmu(path)
     md = open_model_description(fmu_path)
+    driven = _driven(fmu_path, [s for s in expand_signals(md.modelVariables).values() if s.var.causality == "input"
+                                and s.kind in NUMERIC and not (s.shape and s.offset is None)], inputs, input_file)
     starts = {v.name: v.start for v in md.modelVariables}
 
     def describe(v: Any) -> dict[str, Any]:
@@ -76,7 +89,8 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
         "model_identifier": (md.coSimulation or md.modelExchange).modelIdentifier,
         "kinds": [k for k, i in (("cs", md.coSimulation), ("me", md.modelExchange)) if i is not None],
         "generation_tool": md.generationTool,
-        "inputs": groups["input"], "outputs": groups["output"], "parameters": groups["parameter"],
+        "inputs": groups["input"], "driven": driven[0], "left": driven[1],
+        "outputs": groups["output"], "parameters": groups["parameter"],
         "states": states, **({"locals": groups["local"]} if show_all else {}),
         "default_step": _typed("Float64", getattr(md.defaultExperiment, "stepSize", None))
         if md.defaultExperiment else None,
@@ -92,8 +106,37 @@ def fmu_info(path: str, show_all: bool, as_json: bool) -> None:
             start = "" if d["start"] is None else d["start"]
             kind = d["type"] + (f"[{'x'.join(map(str, d['shape']))}]" if "shape" in d else "")
             lines.append(f"    {d['name']:<12} {kind:<10} {start!s:>10} {d['unit']:<12}{rng}  {d['description']}")
+        if key == "inputs":
+            lines.append(f"  {_RULE}" if not (inputs or input_file) else
+                         f"  a run with these options drives {', '.join(driven[0]) or 'no input'}"
+                         + (f"; leaves {', '.join(driven[1])} to the FMU after their start values" if driven[1]
+                            else ""))
     lines.append(f"  states: {', '.join(states) or 'not declared'}")
     _emit(as_json, info, "\n".join(lines))
+
+
+_RULE = ("a run drives only the inputs it is given (--input, --input-file, a controller's, a disturbance); the "
+         "others are left to the FMU after their start values")
+
+
+def _driven(fmu_path: Any, signals: list[Any], inputs: tuple[str, ...], input_file: str | None
+            ) -> tuple[list[str], list[str]]:
+    """The FMU's numeric inputs a run given `inputs` (NAME or NAME=SPEC) and `input_file` drives, and the others."""
+    from ..errors import UnknownVariableError
+    from ..plant.model_description import _close_matches
+
+    names = [s.name for s in signals]
+    given = [item.partition("=")[0].strip() for item in inputs]
+    for name in given:
+        if name not in names:
+            raise UnknownVariableError(f"--input {name}: {fmu_path.name} has no input named {name!r}."
+                                       + _close_matches(name, names))
+    if input_file:
+        from ..data.datafile import file_variables
+
+        given += file_variables(input_file)
+    driven = [name for name in names if name in given]
+    return driven, [name for name in names if name not in driven]
 
 
 _INTEGER_TYPES = ("Integer", "Enumeration", "Int8", "Int16", "Int32", "Int64", "UInt8", "UInt16", "UInt32", "UInt64")

@@ -4,6 +4,11 @@ Inputs are sampled at the communication points ``t_k = t0 + k*dt`` and held over
 Row k of an input column in the result is the value held from ``t_k`` to ``t_{k+1}``; row k of an output
 column is the output at ``t_k``.
 
+Only the inputs given are driven, and only they are recorded as input columns; an input nobody drives is left to
+the FMU after its start value, as FMPy leaves it (see :class:`~cosim.plant.fmu_plant.FmuPlant`), and listed with
+that value in ``meta["left_inputs"]``. Replaying a record (``cosim simulate --input-file``) so drives exactly
+what the first run drove.
+
 Examples
 --------
 >>> from cosim import simulate, build_fmu, signals
@@ -154,7 +159,8 @@ def simulate(
     fmu : path-like
         The FMU (FMI 2.0 or 3.0 co-simulation).
     inputs : mapping, optional
-        Input name -> :data:`InputSpec`. Inputs not named stay at their start values.
+        Input name -> :data:`InputSpec`: the inputs driven. An input not named is left to the FMU: its start value
+        (the FMU's, or one given in `start`) is set once and never again.
     duration, dt : float
         Length of the run and communication step, in seconds; `duration` is a whole number of steps.
     parameters, start : mapping, optional
@@ -177,8 +183,10 @@ def simulate(
     Returns
     -------
     Trajectory
-        Time ``t0 + k*dt`` for k = 0..n, the inputs (role ``input``), the outputs (role ``state`` when the
-        FMU declares them as states, else ``output``); ``meta`` holds the FMU, dt, parameters and start values,
+        Time ``t0 + k*dt`` for k = 0..n, the inputs driven (role ``input``, in modelDescription order), the
+        outputs (role ``state`` when the FMU declares them as states, else ``output``); ``meta`` holds the FMU,
+        dt, parameters and start values, the inputs left to the FMU with their values at the start
+        (``left_inputs``),
         the FMI type of every integer or Boolean column (``types``: written as whole numbers), and ``status``:
         ``"completed"``, or ``"terminated"`` when the FMU ended the simulation itself (Stair at 9 s): the record
         then stops at that time, its last row read there, and ``meta["terminated"]`` holds the time and the
@@ -197,20 +205,19 @@ def simulate(
     named = len(outputs) if isinstance(outputs, (list, tuple)) else 0
     check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
-    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, outputs=outputs, kind=kind,
-                  solver=solver) as plant:
-        plant.check_names(list(inputs), "input")
+    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, inputs=list(inputs), outputs=outputs,
+                  kind=kind, solver=solver) as plant:
         check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
                      what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
                      hint="use a larger dt, a shorter duration or fewer outputs")
         t0 = plant.t0
         t = t0 + dt * np.arange(n + 1)
         u = np.empty((n + 1, len(plant.inputs)))
-        start_values = plant.get(plant.inputs)
         for j, name in enumerate(plant.inputs):
             var = plant.variable(name)
             maximum = float(var.max) if getattr(var, "max", None) not in (None, "") else None
-            u[:, j] = sample_input(name, inputs[name], t, maximum=maximum) if name in inputs else start_values[j]
+            u[:, j] = sample_input(name, inputs[name], t, maximum=maximum)
+        left = dict(zip(plant.left_inputs, plant.get(plant.left_inputs), strict=True))
         y = np.empty((n + 1, len(plant.outputs)))
         if plant.inputs:
             plant.set_inputs(u[0])  # the first row's outputs with the first row's inputs (direct feedthrough)
@@ -233,8 +240,10 @@ def simulate(
                     t[-1] = exc.time
                     break
                 bar.update(last - first)
-        names = list(plant.inputs) + list(plant.outputs)
-        roles = {name: "input" for name in plant.inputs}
+        driven = [name for name in plant.declared_inputs if name in inputs]  # modelDescription order
+        u = u[:, [plant.inputs.index(name) for name in driven]]
+        names = driven + list(plant.outputs)
+        roles = {name: "input" for name in driven}
         roles.update({name: "state" if name in plant.states else "output" for name in plant.outputs})
         types = plant.types
         units = {name: _unit(plant.variable(name)) for name in names}
@@ -252,6 +261,7 @@ def simulate(
             "start": dict(start or {}),
             "inputs": {name: str(spec) if not isinstance(spec, np.ndarray) else "samples"
                        for name, spec in inputs.items()},
+            "left_inputs": left,
             "status": "completed" if ended is None else "terminated",
         }
         if types:

@@ -3,7 +3,9 @@
 At every sample ``t_k = t0 + k*dt`` the loop reads the plant's outputs, hands the measured ones to the
 controller (``u = controller(t_k, y_k)``), holds ``u`` (zero-order hold) together with the scenario's
 disturbance inputs over ``[t_k, t_{k+1})``, and steps the FMU. The controller's compute time is taken around
-each call with ``time.perf_counter_ns``; a call longer than ``dt`` is a **deadline miss**.
+each call with ``time.perf_counter_ns``; a call longer than ``dt`` is a **deadline miss**. An FMU opened here
+drives only the controller's inputs and the disturbance inputs; any other input is left to the FMU after its
+start value (:class:`~cosim.plant.fmu_plant.FmuPlant`), listed with it in the record's ``meta["left_inputs"]``.
 
 The same controller, reset, then runs against a model (the identified model, a ``control.StateSpace`` or
 the controller's own design model) with the same reference and, where the model has them, the same
@@ -349,14 +351,16 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
         ``__call__(t, y)``. It is reset before each run.
     plant : FmuPlant or path-like
         An open :class:`FmuPlant` (its step must equal the controller's ``dt``; it is reset with
-        `parameters` and `start`), or an FMU file, opened and closed here.
+        `parameters` and `start`; it drives the inputs it was opened with, those nobody in the loop drives held at
+        their start values, which a note says), or an FMU file, opened here to drive only the controller's
+        inputs and the disturbances, and closed.
     duration : float
         Length of the run [s], rounded to whole steps.
     reference : number, array, callable of t, or mapping by tracked output
         Set-point of the tracked outputs (a callable gets the whole time array).
     disturbance : mapping, optional
         Plant inputs not driven by the controller, by name (number, array or callable of t), e.g. a load
-        torque ``{"TL": lambda t: 500.0 * (t >= 1.0)}``. Others hold their start value.
+        torque ``{"TL": lambda t: 500.0 * (t >= 1.0)}``. Others are left to the FMU.
     parameters, start : mapping, optional
         FMU parameters (switch effects on: ``{"Fc": 100.0}``) and start values (the initial state).
     model : "design", None, IdentifiedModel, control.StateSpace or DesignModel
@@ -384,7 +388,7 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
         raise InvalidSettingError(f"duration must be a positive number of seconds, got {duration!r}")
     n = max(1, int(round(duration / dt)))
     own = not isinstance(plant, FmuPlant)
-    fmu = FmuPlant(plant, dt=dt, parameters=parameters, start=start, kind=kind) if own else plant
+    fmu = _open(plant, controller, disturbance, dt=dt, parameters=parameters, start=start, kind=kind) if own else plant
     try:
         if not own:
             if not math.isclose(fmu.dt, dt, rel_tol=1e-9):
@@ -397,6 +401,19 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
     finally:
         if own:
             fmu.close()
+
+
+def _open(path: Any, controller: Any, disturbance: Mapping[str, Any] | None, **options: Any) -> FmuPlant:
+    """The FMU at `path`, driving the controller's inputs and the disturbance inputs only."""
+    twice = [name for name in (disturbance or {}) if name in controller.inputs]
+    if twice:
+        raise InvalidSettingError(f"{twice[0]!r} is driven by the controller; a disturbance goes on another input")
+    driven = list(dict.fromkeys([*controller.inputs, *(disturbance or {})]))
+    try:
+        return FmuPlant(path, inputs=driven, **options)
+    except UnknownVariableError as exc:
+        raise UnknownVariableError(f"the loop drives {', '.join(driven)} (the controller's inputs, then the "
+                                   f"disturbances): {exc}") from None
 
 
 def _columns(names: Sequence[str], available: Sequence[str], role: str, where: str) -> list[int]:
@@ -434,6 +451,13 @@ def _closed_loop(controller: Any, fmu: FmuPlant, *, n: int, reference: Any, dist
         noise = np.random.default_rng(seed).standard_normal((n, len(std))) * std
     x0 = dict(zip(fmu.outputs, fmu.read_outputs().tolist(), strict=True))
     notes: list[str] = []
+    undriven = [name for name in fmu.inputs if name not in controller.inputs and name not in (disturbance or {})]
+    if undriven:  # an open plant that drives inputs nobody in the loop drives
+        notes.append(f"the FmuPlant drives {', '.join(undriven)}, which nobody in the loop drives: held at "
+                     f"{', '.join(f'{u_base[0, fmu.inputs.index(n)]:g}' for n in undriven)}; open it with "
+                     f"inputs={list(dict.fromkeys([*controller.inputs, *(disturbance or {})]))} to leave them "
+                     "to the FMU")
+    left = dict(zip(fmu.left_inputs, fmu.get(fmu.left_inputs), strict=True))
 
     controller.reset()
     wall = time.perf_counter()
@@ -446,7 +470,7 @@ def _closed_loop(controller: Any, fmu: FmuPlant, *, n: int, reference: Any, dist
     status = "completed" if done == n else "stopped"
     units = _units(fmu)
     fmu_traj = _trajectory(t[:done + 1], refs[:done + 1], U, Y, controller, fmu.inputs, fmu.outputs,
-                           {"source": "closed_loop", "plant": where}, units)
+                           {"source": "closed_loop", "plant": where, "left_inputs": left}, units)
 
     model_traj = None
     design = getattr(controller, "design_model", None) if isinstance(model, str) and model == "design" else model

@@ -82,7 +82,12 @@ class FmuPlant(_Stepping):
         The inputs driven by :meth:`step`, and the variables it returns, in this order: numbers of any FMI type
         (Float32/64, integers, Booleans and Enumerations, passed as floats) and FMI 3 array elements by name
         (``u[1]``, ``A[1,2]``, row-major, from 1). Default: every numeric input and output, in modelDescription
-        order. `outputs` may also name states and local variables, or be ``"all"``.
+        order. `outputs` may also name states and local variables, or be ``"all"``. An input not driven is left
+        to the FMU (:attr:`left_inputs`): its start value, the FMU's or the one given in `start`, is set once at
+        initialisation and never again, as FMPy leaves an input it is not given. (An FMU may route two inputs to
+        one variable, as Dymola exports ``extForce`` beside ``force.f``: setting the one nobody drives would
+        override the other.) The exception is an element of a partly driven FMI 3 array, which is rewritten
+        with its start value at each step, as FMI sets an array whole.
     instance_name : str
         Name of the FMU instance (appears in the FMU's log messages).
     kind : {"cs", "me"}, optional
@@ -150,6 +155,7 @@ class FmuPlant(_Stepping):
         # anything else a user may record: a state or local (Modelica tools often expose a plant's position only
         # as `mass.s`), a calculated parameter... every number but time and the inputs
         recordable = [s.name for s in numeric if s.var.causality not in ("independent", "input")]
+        self.declared_inputs = tuple(all_in)  # every numeric input, driven or not, in modelDescription order
         self.inputs = tuple(self._choose(inputs, all_in, "input"))
         self.outputs = tuple(recordable if outputs == "all" else all_out if outputs is None
                              else self._choose(outputs, recordable, "variable"))
@@ -255,6 +261,21 @@ class FmuPlant(_Stepping):
                 whole = list(whole) if len(whole) == signal.size else [whole[0]] * signal.size
                 whole[signal.offset] = coerce(var, value)
                 self._settings[var.name] = whole
+
+    @property
+    def left_inputs(self) -> tuple[str, ...]:
+        """The FMU's numeric inputs this plant does not drive, in modelDescription order: left to the FMU after their
+        start values (see `inputs` in the class docstring). :attr:`declared_inputs` holds them all.
+
+        Examples
+        --------
+        >>> from cosim import FmuPlant, build_fmu
+        >>> with FmuPlant(build_fmu(), dt=1e-3, inputs=["Tm"]) as plant:
+        ...     plant.inputs, plant.left_inputs
+        (('Tm',), ('TL',))
+        """
+        driven = set(self.inputs)
+        return tuple(name for name in self.declared_inputs if name not in driven)
 
     @property
     def parameters(self) -> dict[str, Any]:
