@@ -148,7 +148,7 @@ class Scenario:
         object.__setattr__(self, "parameters", dict(self.parameters))
         object.__setattr__(self, "start", dict(self.start))
         if not self.name:
-            extra = "".join(f",{k}={v:g}" for k, v in self.parameters.items())
+            extra = "".join(f",{k}={_short(v)}" for k, v in self.parameters.items())
             detail = (f"{self.kind}:amp={self.amplitude:g},at={self.at:g}" +
                       (f",rate={self.rate:g}" if self.kind == "ramp" else "") +
                       (f",input={self.input}" if self.kind == "disturbance" else ""))
@@ -186,6 +186,17 @@ class Scenario:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Scenario:
         return cls(**dict(data))
+
+
+def _short(value: Any) -> str:
+    """A parameter's value in a scenario's name: a number as ``%g``, an array as compact JSON."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:g}"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        import json
+
+        return json.dumps(np.asarray(value).tolist(), separators=(",", ":"))
+    return str(value)
 
 
 def setpoint_step(amplitude: float, *, at: float = 0.05, duration: float = 2.0, **options: Any) -> Scenario:

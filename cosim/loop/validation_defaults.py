@@ -104,11 +104,12 @@ def check_parameter_names(fmu: Any, scenarios: Iterable[Any], parameters: Mappin
                 continue
             near = difflib.get_close_matches(name, [*SCENARIO_KEYS, *known], n=1, cutoff=0.6)
             hint = f"; did you mean {near[0]}?" if near else ""
-            listed = ", ".join(known[:30]) + (" ..." if len(known) > 30 else "") if known else "none"
+            listed = (f"its parameters: {', '.join(known[:30])}" + (" ..." if len(known) > 30 else "") if known
+                      else "it has no parameters")
             if source is None:
-                raise SpecError(f"{name!r} is not a parameter of {label}{hint} (its parameters: {listed})")
+                raise SpecError(f"{name!r} is not a parameter of {label}{hint} ({listed})")
             raise SpecError(f"scenario option {name!r} in {source.name!r} is neither a scenario key "
-                            f"({', '.join(SCENARIO_KEYS)}) nor a parameter of {label}{hint} (its parameters: {listed})")
+                            f"({', '.join(SCENARIO_KEYS)}) nor a parameter of {label}{hint} ({listed})")
 
 
 def _declared(md: Any, name: str) -> Any:

@@ -255,11 +255,14 @@ def robustness_plan(fmu: str | os.PathLike, *, spread: float = 0.2, uncertain: S
     if uncertain is None:
         chosen = (list(DEFAULT_UNCERTAIN) if all(n in values for n in DEFAULT_UNCERTAIN)
                   else [n for n, v in values.items() if v != 0.0 and math.isfinite(v)])
+        if not chosen and not real:
+            raise InvalidSettingError(f"{label} declares no real parameter, so a Monte Carlo has nothing to vary (an "
+                                      "exported model keeps its coefficients as constants); validate without "
+                                      "--robustness, or on an FMU with parameters")
         if not chosen:
-            what = ("declares no real parameter" if not real else
-                    f"has no real parameter with a non-zero value ({', '.join(real[:40])})")
-            raise InvalidSettingError(f"{label} {what}: nothing to spread around; name parameters with --vary "
-                                      "NAME,... (or vary=...), or validate without --robustness")
+            raise InvalidSettingError(f"{label} has no real parameter with a non-zero value to spread around (its "
+                                      f"real parameters: {', '.join(real[:40])}); name them with --vary NAME,... "
+                                      "and give their values with --set")
     else:
         chosen = [e for name in uncertain for e in pick(str(name), "vary")]
     ranges: dict[str, tuple[float, float]] = {}
