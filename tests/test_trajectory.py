@@ -286,7 +286,7 @@ def test_missing_file_and_unknown_suffix(tmp_path, traj):
     with pytest.raises(FmuNotFoundError) as info:
         Trajectory.read(tmp_path / "nowhere.csv")
     assert str(tmp_path / "nowhere.csv") in str(info.value) and isinstance(info.value, FileNotFoundError)
-    with pytest.raises(InvalidSettingError, match=r"use \.csv, \.parquet or \.pq"):
+    with pytest.raises(InvalidSettingError, match=r"use \.csv, \.parquet, \.pq or \.mat"):
         traj.write(tmp_path / "run.txt")
     (tmp_path / "junk.parquet").write_bytes(b"not parquet at all")
     with pytest.raises(DataError, match="cannot read junk.parquet as Parquet"):

@@ -3,7 +3,8 @@
 * :mod:`~cosim.data.trajectory` - :class:`Trajectory`, a record of named signals with units and roles, its CSV
   and Parquet files;
 * :mod:`~cosim.data.datafile` - :func:`load_data` for measured files (CSV, Parquet, ``.mat``) with column
-  expressions, and :func:`check_excitation`;
+  expressions, :func:`check_excitation`, and what a file holds before it is read (:func:`file_variables`,
+  :func:`time_column`: ``t`` when a file has one and no ``time``, else ``time``);
 * :mod:`~cosim.data.derivatives` - derivative estimation (:func:`differentiate`, :data:`DERIVATIVE_METHODS`);
 * :mod:`~cosim.data.decimation` - a signal's band above its noise (:func:`signal_bandwidth`) and a record at a
   lower rate (:func:`decimate`);
@@ -20,7 +21,7 @@ Imports the plant room and the foundation only.
 
 from __future__ import annotations
 
-from .datafile import MIN_SAMPLES, UNIFORM_RTOL, check_excitation, load_data
+from .datafile import MIN_SAMPLES, UNIFORM_RTOL, check_excitation, file_variables, load_data, time_column
 from .decimation import decimate, signal_bandwidth
 from .derivatives import DERIVATIVE_METHODS, differentiate
 from .plots import plot_trajectory
@@ -53,8 +54,8 @@ from .trajectory import ROLES, Trajectory
 __all__ = [
     "Chirp", "Constant", "DERIVATIVE_METHODS", "InputSpec", "MIN_SAMPLES", "Multisine", "Prbs", "ROLES",
     "SIGNAL_KINDS", "ScaledSignal", "Signal", "SignalKind", "SignalSum", "SineWave", "SquareWave", "Step",
-    "Trajectory", "UNIFORM_RTOL", "check_excitation", "chirp", "constant", "decimate", "differentiate", "load_data",
+    "Trajectory", "UNIFORM_RTOL", "check_excitation", "chirp", "constant", "decimate", "differentiate",
+    "file_variables", "load_data",
     "multisine", "parse_signal", "plot_trajectory", "prbs", "sample_input", "signal_bandwidth", "signal_kinds_help",
-    "simulate", "sine",
-    "square", "step",
+    "simulate", "sine", "square", "step", "time_column",
 ]

@@ -1,6 +1,8 @@
 """Reading a measurement file's variables for :func:`~cosim.data.datafile.load_data`: a MATLAB ``.mat`` file
-(``scipy.io.loadmat``, imported when one is read) or a CSV/Parquet table (through
-:meth:`~cosim.data.trajectory.Trajectory.read`).
+(``scipy.io.loadmat`` through :func:`~cosim.data._trajectory_mat.load_mat`, which gives a cosim file's variables
+under their signals' names) or a CSV/Parquet table (through :meth:`~cosim.data.trajectory.Trajectory.read`); and
+what a file holds before it is read: :func:`file_variables`, and :func:`time_column`, cosim's one rule for the
+time (``t`` when a file has one and no ``time``, else ``time``).
 
 Each reader finds the time variable, checks that the file has every variable the columns use (an
 :class:`~cosim.errors.UnknownVariableError` lists the ones it has) and gives them as :class:`_Raw`, with the
@@ -31,6 +33,7 @@ file rig.mat)
 from __future__ import annotations
 
 import csv
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,11 +41,63 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError, UnknownVariableError
+from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
 from ._column_expressions import _INDEX_HELP, _Column, _parse_reference, _plain_column, _Ref
+from ._trajectory_mat import load_mat, mat_names
 from .trajectory import Trajectory
 
-_TIME_NAMES = ("t", "time")
+_TABLES = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+
+
+def file_variables(path: str | os.PathLike) -> list[str]:
+    """The names of a data file's variables, time included, read without its data: a CSV's header row, a Parquet
+    file's schema, a ``.mat`` file's variables (a cosim file's under its signals' names).
+
+    Raises
+    ------
+    FmuNotFoundError
+        No file at `path`.
+    InvalidSettingError
+        A suffix other than .csv, .parquet, .pq, .mat.
+    DataError
+        A file that cannot be read as its suffix says.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "rig.csv"
+    >>> _ = path.write_text("t,volts,pos\\n0,1,2\\n")
+    >>> file_variables(path), time_column(path)
+    (['t', 'volts', 'pos'], 't')
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (*_TABLES, ".mat"):
+        raise InvalidSettingError(f"cannot tell the format of {path.name!r} from its suffix; use .csv, .parquet, .pq "
+                                  "or .mat")
+    if not path.is_file():
+        what = "is a folder, not a file" if path.is_dir() else "does not exist"
+        raise FmuNotFoundError(f"data file {path} {what}; check the path")
+    return mat_names(path) if suffix == ".mat" else _table_names(path, _TABLES[suffix])
+
+
+def time_column(source: str | os.PathLike | Sequence[str]) -> str:
+    """The time of a data file by cosim's rule: ``t`` when the file has a ``t`` and no ``time``, else ``time``
+    (the column cosim writes, beside which a signal may be named ``t``).
+
+    Parameters
+    ----------
+    source : path-like or sequence of str
+        A CSV, Parquet or ``.mat`` file (its names are read by :func:`file_variables`, not its data), or the
+        names themselves.
+
+    Examples
+    --------
+    >>> time_column(["t", "u"]), time_column(["time", "t"]), time_column(["u"])
+    ('t', 'time', 'time')
+    """
+    names = file_variables(source) if isinstance(source, (str, os.PathLike)) else list(source)
+    return "t" if "t" in names and "time" not in names else "time"
 
 
 @dataclass
@@ -71,7 +126,7 @@ def _refuse_index(path: Path, ref: _Ref, where: str) -> None:
 
 
 def _time_name(path: Path, names: Sequence[str], time: str | None, matrices: bool = True) -> _Ref:
-    """The time: ``t`` else ``time`` by default, else the variable `time` names or the column or row of a ``.mat``
+    """The time: :func:`time_column`'s by default, else the variable `time` names or the column or row of a ``.mat``
     matrix it indexes (``"data[:,0]"``; `matrices` False, for a CSV or Parquet table, refuses that)."""
     if time is not None and time not in names:
         ref = _parse_reference(time, f"time {time!r}")
@@ -82,11 +137,10 @@ def _time_name(path: Path, names: Sequence[str], time: str | None, matrices: boo
                 return ref
             raise UnknownVariableError(f"{path.name} has no variable {ref.variable!r} (time {time!r}); it has: "
                                        f"{_listing(names)}; check the spelling")
-    candidates = _TIME_NAMES if time is None else (time,)
-    for name in candidates:
-        if name in names:
-            return _Ref(name)
-    wanted = " or ".join(repr(c) for c in candidates)
+    name = time_column(names) if time is None else time
+    if name in names:
+        return _Ref(name)
+    wanted = "'t' or 'time'" if time is None else repr(time)
     raise UnknownVariableError(f"{path.name} has no time variable {wanted}; it has: {_listing(names)}; "
                                "pass time=<name of the time variable> (--time on the command line; data[:,0] "
                                "for column 0 of a .mat matrix)")
@@ -106,18 +160,7 @@ def _missing(path: Path, names: Sequence[str], columns: Sequence[_Column]) -> No
 
 
 def _read_mat(path: Path, time: str | None, columns: list[_Column] | None) -> tuple[_Raw, list[_Column]]:
-    import scipy.io
-
-    try:
-        data = scipy.io.loadmat(path)
-    except NotImplementedError:
-        raise DataError(f"{path.name} is a MATLAB v7.3 (HDF5) file, which cosim does not read; re-save it in "
-                        f"MATLAB with save('{path.name}', ..., '-v7') or export it as CSV") from None
-    except Exception as exc:  # scipy raises many types (MatReadError, ValueError, IndexError...) on a bad file
-        reason = " ".join(str(exc).split())
-        raise DataError(f"cannot read {path.name} as a MATLAB file ({reason}); expected a .mat file saved "
-                        "with MATLAB's save (version 7 or older)") from None
-    variables = {k: v for k, v in data.items() if not k.startswith("__")}
+    variables, header = load_mat(path)
     names = list(variables)
     time_ref = _time_name(path, names, time)
     n = _values(path, time_ref, variables, None).size
@@ -133,7 +176,8 @@ def _read_mat(path: Path, time: str | None, columns: list[_Column] | None) -> tu
             raise DataError(f"{path.name} has no vector of {n} samples besides {time_ref.key!r}; it has: "
                             f"{_listing(names)}{hint}")
     _missing(path, names, columns)
-    return _Raw(variables, time_ref, {}, {}, {}), columns
+    return _Raw(variables, time_ref, dict(header.get("units", {})), dict(header.get("roles", {})),
+                dict(header.get("meta", {}))), columns
 
 
 def _is_numeric(value: Any) -> bool:

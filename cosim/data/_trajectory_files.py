@@ -1,4 +1,5 @@
-"""The files of a :class:`~cosim.data.trajectory.Trajectory`: CSV and Parquet, written and read.
+"""The files of a :class:`~cosim.data.trajectory.Trajectory`: CSV and Parquet, written and read (``.mat`` files:
+:mod:`._trajectory_mat`).
 
 The formats are described in :mod:`cosim.data.trajectory`. Writers take a trajectory and write atomically
 (:func:`~cosim.files.atomic_output`); :func:`read_file` gives the time column, the signals and the cosim header
@@ -38,7 +39,7 @@ _VERSION = 1
 _SIDECAR_VERSION = 2
 _CSV_PREFIX = f"# {_FORMAT} v"
 _PARQUET_KEY = _FORMAT.encode()
-_SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet"})
+_SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mat": "mat"})
 
 
 @functools.cache
@@ -122,7 +123,7 @@ def _file_kind(path: Path) -> str:
     kind = _SUFFIXES.get(path.suffix.lower())
     if kind is None:
         raise InvalidSettingError(f"cannot tell the format of {path.name!r} from its suffix; "
-                                  "use .csv, .parquet or .pq")
+                                  "use .csv, .parquet, .pq or .mat")
     return kind
 
 

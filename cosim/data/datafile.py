@@ -15,7 +15,8 @@ Formats, by suffix
 ``.mat``
     MATLAB files up to version 7 (``scipy.io.loadmat``), each variable a column or row vector of one value per
     time, a scalar (a gain, say) that an expression broadcasts over time, or a matrix of channels read one
-    column or row at a time (below). MATLAB v7.3 files are HDF5 files that cosim does not read: re-save them
+    column or row at a time (below); a cosim ``.mat`` file (``Trajectory.write("run.mat")``) keeps its signals'
+    names, units, roles and meta. MATLAB v7.3 files are HDF5 files that cosim does not read: re-save them
     with ``save(file, '-v7')`` (or export a CSV).
 
 Columns
@@ -93,12 +94,13 @@ import numpy as np
 
 from ..errors import DataError, FmuNotFoundError, InvalidSettingError, UnknownVariableError
 from ._column_expressions import _evaluate, _parse_columns
-from ._measurement_files import _listing, _read_mat, _read_table, _values
+from ._measurement_files import _listing, _read_mat, _read_table, _values, file_variables, time_column
 from .derivatives import DERIVATIVE_METHODS, _method, _savgol_windows, differentiate
 from .trajectory import Trajectory
 
 # differentiate and DERIVATIVE_METHODS live in cosim.data.derivatives; they import from here too
-__all__ = ["load_data", "differentiate", "check_excitation", "DERIVATIVE_METHODS", "MIN_SAMPLES", "UNIFORM_RTOL"]
+__all__ = ["load_data", "differentiate", "check_excitation", "file_variables", "time_column", "DERIVATIVE_METHODS",
+           "MIN_SAMPLES", "UNIFORM_RTOL"]
 
 #: Fewest samples a record may have: two give a time step, three a central difference.
 MIN_SAMPLES = 3
@@ -214,7 +216,8 @@ def load_data(
     path : path-like
         The file; its suffix says the format (``.csv``, ``.parquet``/``.pq``, ``.mat``).
     time : str, optional
-        Name of the time variable in s; default ``"t"``, else ``"time"``. In a ``.mat`` file, also a column or
+        Name of the time variable in s; default :func:`time_column`'s: ``"t"`` when the file has one and no
+        ``"time"``, else ``"time"``. In a ``.mat`` file, also a column or
         row of a matrix: ``"data[:,0]"``, ``"data[0,:]"`` (0-based).
     columns : sequence of str or mapping, optional
         The signals, in order: a variable of the file (``"qm"``) or a named expression of its variables

@@ -1,4 +1,4 @@
-"""A sampled record of named signals: :class:`Trajectory`, with its CSV and Parquet files.
+"""A sampled record of named signals: :class:`Trajectory`, with its CSV, Parquet and .mat files.
 
 A trajectory holds the sample times, one column per signal, each signal's unit and role (``"state"``,
 ``"input"`` or ``"output"``) and a JSON-ready ``meta`` dict (source FMU, dt, parameters, noise...). Inputs are
@@ -14,7 +14,8 @@ sample time and meta are in the sidecar ``NAME.meta.json``
 ``# cosim-trajectory v1 {...}``, still read. Parquet (``.parquet``, ``.pq``): columns ``time``, ``<name>``...
 as float64, the same JSON (with ``"version": 1``) under the schema metadata key ``cosim-trajectory``.
 Plain files from other tools (a header with a time column, or a Parquet table) read too; their roles are
-``"output"`` unless given. Writes are atomic: a temporary file in the same folder, then a rename.
+``"output"`` unless given. MATLAB (``.mat``): ``time`` and a variable per signal, the header in a char variable
+(:mod:`~cosim.data._trajectory_mat`). Writes are atomic: a temporary file in the same folder, then a rename.
 
 The checks of a trajectory's fields are in :mod:`~cosim.data._trajectory_checks`, the readers and writers of
 its files in :mod:`~cosim.data._trajectory_files` (pandas and pyarrow are imported there when a file is used).
@@ -36,6 +37,7 @@ import numpy as np
 from ..errors import DataError, InvalidSettingError, UnknownVariableError
 from ._trajectory_checks import _TIME, ROLES, _as_names, checked_fields
 from ._trajectory_files import _file_kind, read_file, write_csv, write_parquet
+from ._trajectory_mat import read_mat, write_mat
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -514,7 +516,8 @@ class Trajectory:
         return write_parquet(self, path)
 
     def write(self, path: str | os.PathLike) -> Path:
-        """Write to `path` atomically, as CSV (``.csv``) or Parquet (``.parquet``, ``.pq``); return the path.
+        """Write to `path` atomically, as CSV (``.csv``), Parquet (``.parquet``, ``.pq``) or MATLAB (``.mat``, one
+        variable per signal and ``time``: :mod:`~cosim.data._trajectory_mat`); return the path.
 
         Examples
         --------
@@ -525,7 +528,8 @@ class Trajectory:
         {'dt': 1.0}
         """
         kind = _file_kind(Path(path))
-        return self.to_csv(path) if kind == "csv" else self.to_parquet(path)
+        writer = {"csv": write_csv, "parquet": write_parquet, "mat": write_mat}[kind]
+        return writer(self, path)
 
     @classmethod
     def read(
@@ -536,7 +540,7 @@ class Trajectory:
         time: str = _TIME,
         roles: Mapping[str, str] | None = None,
     ) -> Trajectory:
-        """Read a CSV (``.csv``) or Parquet (``.parquet``, ``.pq``) file written by cosim or by another tool.
+        """Read a CSV (``.csv``), Parquet (``.parquet``, ``.pq``) or MATLAB (``.mat``) file, cosim's or another tool's.
 
         Names, units, roles and meta come back as written. A plain file needs a header row with a time
         column; its signals get unit ``""`` and role ``"output"`` unless `roles` says otherwise.
@@ -560,7 +564,7 @@ class Trajectory:
             No time column, missing requested columns (both listing the columns present), a non-numeric
             column, NaN or non-increasing time, an unreadable file.
         InvalidSettingError
-            A suffix other than .csv, .parquet, .pq.
+            A suffix other than .csv, .parquet, .pq, .mat.
 
         Examples
         --------
@@ -573,7 +577,7 @@ class Trajectory:
         (('torque', 'angle'), ('input', 'output'))
         """
         path = Path(path)
-        t, data, header = read_file(path, time, columns)
+        t, data, header = (read_mat if _file_kind(path) == "mat" else read_file)(path, time, columns)
         roles = dict(roles or {})
         extra = [name for name in roles if name not in data]
         if extra:
