@@ -19,7 +19,7 @@ from typing import Any
 
 from .errors import InvalidSettingError
 
-__all__ = ["MEMORY_FRACTION", "available_memory", "check_memory", "finite_number", "parse_number"]
+__all__ = ["MEMORY_FRACTION", "WrittenNumber", "available_memory", "check_memory", "finite_number", "parse_number"]
 
 #: The share of the machine's available memory one array of results may take (the rest: copies, the OS).
 MEMORY_FRACTION = 0.5
@@ -86,6 +86,28 @@ def parse_number(text: str | float, *, what: str = "value") -> float:
     if not math.isfinite(value):
         raise InvalidSettingError(f"{what}: {text!r} is not a finite number")
     return value
+
+
+class WrittenNumber(float):
+    """A number read from text that keeps the text: a float everywhere, and its `text` for a variable that takes
+    text, whatever it looks like (a String's value, a Binary's hex digits: ``--set Binary_input=626172``).
+
+    Examples
+    --------
+    >>> n = WrittenNumber(parse_number("626172"), "626172")
+    >>> n + 1, n.text
+    (626173.0, '626172')
+    """
+
+    text: str
+
+    def __new__(cls, value: float, text: str) -> WrittenNumber:
+        number = super().__new__(cls, value)
+        number.text = str(text)
+        return number
+
+    def __reduce__(self) -> tuple[type, tuple[float, str]]:
+        return WrittenNumber, (float(self), self.text)
 
 
 def finite_number(value: Any, name: str, *, low: float | None = None, strict: bool = False) -> float:

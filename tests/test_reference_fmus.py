@@ -212,6 +212,24 @@ def test_bad_input_is_one_line_exit_2(ref, tmp_path, args, message):
     assert message in done.output and done.output.count("\n") == 1, done.output
 
 
+def test_a_binary_takes_its_hex_digits_as_text_whatever_they_are(ref, tmp_path):
+    """Issue 38 item 2: `--set Binary_input=626172`, hex digits that are all decimal digits, sets the bytes 62 61 72
+    (not the number 626172, which a Binary refuses, from Python too, in one line)."""
+    from cosim.cli._command import _settings
+
+    path = ref[3]["Feedthrough"]
+    done = CliRunner().invoke(cli, ["simulate", str(path), "--duration", "0.2", "--dt", "0.1", "--set",
+                                    "Binary_input=626172", "--set", "String_input=42", "-o", str(tmp_path / "r.csv")])
+    assert done.exit_code == 0, done.output
+    assert cosim.Trajectory.read(tmp_path / "r.csv").meta["start"] == {"Binary_input": "626172", "String_input": "42"}
+    with cosim.FmuPlant(path, dt=0.1, start=_settings(("Binary_input=626172", "String_input=42"), "--set")) as plant:
+        plant.step([float(v) for v in plant.get(plant.inputs)])
+        assert plant.get(["Binary_output", "String_output"]) == [bytes([0x62, 0x61, 0x72]), "42"]
+    with pytest.raises(InvalidSettingError, match=r"^Binary_input is a Binary variable: give bytes \(b'bar'\) or their "
+                                                  r"hex digits as text \('626172'\), got the int 626172$"):
+        cosim.FmuPlant(path, dt=0.1, start={"Binary_input": 626172})
+
+
 def test_api_errors_name_the_variable(ref):
     with pytest.raises(UnknownVariableError, match=r"y\[4\] is out of range: y is a 3 array"):
         cosim.FmuPlant(ref[3]["StateSpace"], dt=0.1, outputs=["y[4]"])

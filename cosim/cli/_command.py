@@ -22,7 +22,7 @@ from typing import Any
 import click
 
 from ..errors import CosimDeprecationWarning, CosimError, InvalidSettingError
-from ..numbers import parse_number
+from ..numbers import WrittenNumber, parse_number
 
 #: Exit status when the result does not meet what was asked (a failed spec, an unstable model): errors whose
 #: class sets ``exit_status = 1``.
@@ -96,12 +96,16 @@ def _pairs(items: tuple[str, ...], option: str) -> dict[str, str]:
 def _settings(items: tuple[str, ...], option: str) -> dict[str, Any]:
     """``--set``/``--start`` values by name, each as its text writes it: a number (``0.3``, ``1/2257``), an
     array (``A=[[0,1],[-2,-3]]``, JSON), true/false, else the text itself (a String variable's value). The FMU's
-    variable types check them when they are applied.
+    variable types check them when they are applied; a number keeps its text
+    (:class:`~cosim.numbers.WrittenNumber`), which a String or a Binary variable takes as it is written
+    (``Binary_input=626172``: the bytes 62 61 72).
 
     Examples
     --------
     >>> _settings(("Fc=1/4", "A=[[0,1],[-2,-3]]", "on=true", "label=left"), "--set")
     {'Fc': 0.25, 'A': [[0, 1], [-2, -3]], 'on': True, 'label': 'left'}
+    >>> _settings(("Binary_input=626172",), "--set")["Binary_input"].text
+    '626172'
     """
     out: dict[str, Any] = {}
     for name, text in _pairs(items, option).items():
@@ -115,7 +119,7 @@ def _settings(items: tuple[str, ...], option: str) -> dict[str, Any]:
             out[name] = text.lower() == "true"
         else:
             try:
-                out[name] = parse_number(text, what=f"{option} {name}")
+                out[name] = WrittenNumber(parse_number(text, what=f"{option} {name}"), text)
             except InvalidSettingError:
                 out[name] = text
     return out

@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidSettingError, SimulationTerminated
-from ..numbers import check_memory
+from ..numbers import WrittenNumber, check_memory
+from ..plant._variables import kind_of
 from ..plant.fmu_plant import FmuPlant
 from .signals import Signal, parse_signal
 from .trajectory import Trajectory
@@ -102,6 +103,20 @@ def _unit(var: Any) -> str:
     if not unit and getattr(var, "declaredType", None) is not None:
         unit = getattr(var.declaredType, "unit", None)
     return unit or ""
+
+
+def _written(plant: FmuPlant, values: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Start values as the record's meta keeps them (JSON): a Binary's bytes as their hex digits, a number read from
+    text (:class:`~cosim.numbers.WrittenNumber`) as that text where the variable takes text."""
+    out = {}
+    for name, value in (values or {}).items():
+        kind = kind_of(plant.variable(name).type)
+        if isinstance(value, (bytes, bytearray)):
+            value = bytes(value).hex()
+        elif isinstance(value, WrittenNumber) and kind in ("string", "binary"):
+            value = value.text
+        out[name] = value
+    return out
 
 
 HOLDS = ("zoh", "linear")
@@ -258,7 +273,7 @@ def simulate(
             "t0": t0,
             "intersample": "zoh",
             "parameters": plant.parameters,
-            "start": dict(start or {}),
+            "start": _written(plant, start),
             "inputs": {name: str(spec) if not isinstance(spec, np.ndarray) else "samples"
                        for name, spec in inputs.items()},
             "left_inputs": left,

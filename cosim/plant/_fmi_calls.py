@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidSettingError
+from ..numbers import WrittenNumber
 from ._variables import kind_of
 
 STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
@@ -29,7 +30,9 @@ def coerce(var: Any, value: Any) -> Any:
     """`value` as the Python type of `var` (an FMPy ``ModelVariable``), or InvalidSettingError saying why not.
 
     Numbers for Float and integer variables (a whole number for an integer, within its type's range), true/false
-    or 0/1 for a Boolean, text for a String, bytes (or their hex digits) for a Binary.
+    or 0/1 for a Boolean, text for a String, bytes or their hex digits as text for a Binary (a number is refused:
+    ``626172`` could be hex digits or not; a :class:`~cosim.numbers.WrittenNumber`, read from a command line,
+    gives its text to a String or a Binary).
 
     Examples
     --------
@@ -64,6 +67,8 @@ def coerce(var: Any, value: Any) -> Any:
         if value not in (0, 1, True, False):
             raise InvalidSettingError(f"{var.name} takes true/false or 0/1, got {value!r}")
         return bool(value)
+    if isinstance(value, WrittenNumber):  # a number read from text (--set): a String or a Binary takes the text
+        value = value.text
     if kind == "string":
         if not isinstance(value, str):
             raise InvalidSettingError(f"{var.name} is a String variable: it takes text, got {value!r}")
@@ -71,8 +76,11 @@ def coerce(var: Any, value: Any) -> Any:
     if kind == "binary":
         if isinstance(value, (bytes, bytearray)):
             return bytes(value)
+        if not isinstance(value, str):
+            raise InvalidSettingError(f"{var.name} is a Binary variable: give bytes (b'bar') or their hex digits as "
+                                      f"text ('626172'), got the {type(value).__name__} {value!r}")
         try:
-            return bytes.fromhex(str(value))
+            return bytes.fromhex(value)
         except ValueError:
             raise InvalidSettingError(f"{var.name} is a Binary variable: give bytes or their hex digits "
                                       f"(e.g. 666f6f), got {value!r}") from None

@@ -40,7 +40,8 @@ ModelStatus model_get_real(Model *m, unsigned vr, double *value) {
     case VR_TIME: *value = m->time; return MODEL_OK;
     case VR_EXTFORCE:
     case VR_FORCE_F: *value = m->F; return MODEL_OK;
-    case VR_S: *value = m->x[0]; return MODEL_OK;
+    case VR_S:
+    case VR_POSITION: *value = m->x[0]; return MODEL_OK;
     case VR_V: *value = m->x[1]; return MODEL_OK;
     case VR_DER_S:
     case VR_DER_V:

@@ -36,7 +36,8 @@ enum {
     VR_D = 9,
     VR_FC = 10,
     VR_VS = 11,
-    VR_COUNT = 12
+    VR_POSITION = 12, /* output: mass.s, as a position sensor gives it */
+    VR_COUNT = 13
 };
 
 typedef enum {
