@@ -61,8 +61,9 @@ from .loop.closed_loop import closed_loop
 from .loop.plots import plot_closed_loop
 from .loop.response import jsonable_metrics
 from .loop.validation import TELESCOPE_SPECS, Verdict, disturbance_step, setpoint_step, validate
+from .loop.validation_report import fmu_text, verdict_summary
 from .plant.build import build_fmu
-from .report import Report
+from .report import Report, step_text
 from .study.cases import STUDY_SETTINGS
 from .study.paper import STATES, STUDY_DT
 
@@ -198,6 +199,9 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     _advance(bar, "loop prediction")
     discrepancy = _discrepancy_stage(report, linear, diagnosis.model_after, fmu, out, friction=friction)
     _advance(bar, "report")
+    report.add_summary(**_summary(fmu, measured, diagnosis, diagnosis_summary, linear, diagnosed, discrepancy,
+                                  friction=friction, noise=noise, seed=seed, data=Path(data),
+                                  seconds=time.perf_counter() - started))
     report_path = report.write(out / "report.html")
     bar.update()
     return {
@@ -249,16 +253,52 @@ def summary_lines(result: dict[str, Any]) -> list[str]:
             comp = " + compensation" if c.get("compensated") else ""
             verdict = "PASSED" if c["passed"] else ("loop specs met, deadline spec missed (a busy computer)"
                                                     if c.get("loop_specs_met") else "FAILED")
-            lines.append(f"{name.upper()}{comp} {label}: {verdict}; step: settling "
-                         f"{c['settling_time']:.3f} s, overshoot {c['overshoot_pct']:.2f} %, steady-state error "
-                         f"{c['steady_state_error']:.2e} rad, IAE {c['iae']:.3e}; load step: settling "
-                         f"{c['disturbance']['settling_time']:.3f} s, IAE {c['disturbance']['iae']:.3e}")
+            d = c["disturbance"]
+            lines.append(f"{name.upper()}{comp} {label}: {verdict}; step: settling {_text(c['settling_time'], '.3f')} "
+                         f"s, overshoot {_text(c['overshoot_pct'], '.2f')} %, steady-state error "
+                         f"{_text(c['steady_state_error'], '.2e')} rad, IAE {_text(c['iae'], '.3e')}; load step: "
+                         f"settling {_text(d['settling_time'], '.3f')} s, IAE {_text(d['iae'], '.3e')}")
             lines += [f"  reason: {r}" for r in c["reasons"]]
     for name, d in (result.get("model_discrepancy") or {}).items():
         lines.append(f"{name.upper()} loop (step, on the FMU) predicted by the linear model: {d['linear_pct']:.3g} % "
                      f"RMS, by the diagnosed model: {d['diagnosed_pct']:.3g} %")
     lines += [f"report: {result['report']}", f"seconds: {result['seconds']}"]
     return lines
+
+
+def _summary(fmu: Path, measured: Trajectory, diagnosis: DiagnosisReport, diagnosis_summary: dict[str, Any],
+             linear: dict[str, Any], diagnosed: dict[str, Any], discrepancy: dict[str, dict[str, float]], *,
+             friction: float, noise: float, seed: int, data: Path, seconds: float) -> dict[str, Any]:
+    """The report's summary box: the plant, the data, the friction found (± standard error, beside the truth),
+    the free-run error before and after, the four controllers' verdicts per scenario, the loop predicted, the
+    time."""
+    facts = diagnosis.summary(against="the noise-free run with friction")
+    for effect in facts["effects"]:
+        if effect["name"] == "coulomb_friction":
+            effect.update(units={"Fc": "N m", "smoothing_velocity": "rad/s"}, truth={"Fc": friction})
+    scenarios = ("0.01 rad step", "500 N m load step")
+    verdicts = []
+    for variant, entries in (("linear model", linear), ("diagnosed model", diagnosed)):
+        for name, entry in entries.items():
+            s = entry["summary"]
+            row = verdict_summary(entry["verdict"], f"{name.upper()}{' + compensation' if s.get('compensated') else ''}"
+                                  f", designed on the {variant}", note="loop specs met, deadline missed (a busy "
+                                  "computer)" if not s["passed"] and s["loop_specs_met"] else "")
+            verdicts.append({**row, "scenarios": dict(zip(scenarios, row["scenarios"].values(), strict=True))})
+    loop = "; ".join(f"{name.upper()} {d['linear_pct']:.3g} % with the linear model → {d['diagnosed_pct']:.3g} % "
+                     "with the diagnosed one" for name, d in discrepancy.items())
+    return {"plant": f"{fmu_text(fmu)}: the bundled two-mass servo, with an undeclared Coulomb friction "
+                     f"Fc = {friction:g} N m switched on",
+            "data": f"{data.name}: {len(measured)} samples, {float(measured.time[-1] - measured.time[0]):.4g} s at "
+                    f"{step_text(measured.dt)}; 1-40 Hz multisine torque from rest; noise {noise * 100:g} % of each "
+                    f"state's std (seed {seed}); the diagnosis searched the first "
+                    f"{diagnosis_summary['window_s']:.3g} s",
+            "context": [("Model", "linear SINDYc with the reference study's settings (model.json); with the effects "
+                                  "found: model_diagnosed.json")],
+            **{k: facts[k] for k in ("effects", "no_effect", "errors", "error_label")},
+            "verdicts": verdicts,
+            "more": [("Loop predicted", "RMS of FMU minus model, load angle, % of the step: " + loop)],
+            "seconds": seconds, "timing": {"diagnosis": diagnosis_summary["seconds"]}}
 
 
 def _data_sections(part: Report, plot: Path, fit_plot: Path, model: Any, fit: dict[str, Any]) -> None:
@@ -338,7 +378,7 @@ def _designs(sys_c: Any) -> dict[str, Any]:
     from controllers.mpc import MPC
     from controllers.pid import tune_pid
 
-    pid = tune_pid(sys_c, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", **_LIMITS)
+    pid = tune_pid(sys_c, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", **_LIMITS)
     mpc = MPC(sys_c, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"], tracked=["theta_L"],
               **_LIMITS)
     for controller in (pid, mpc):
@@ -448,6 +488,16 @@ def _law(controller: Any) -> str:
     return " + ".join(f"{g:.4g}*{t}" for g, t in zip(controller.gains[0], controller.terms, strict=True))
 
 
+def _text(value: float | None, spec: str) -> str:
+    """`value` formatted by `spec`, "n/a" when the figure is undefined (a loop that never settled)."""
+    return "n/a" if value is None else format(value, spec)
+
+
+def _num(value: float | None, digits: int) -> float | str:
+    """`value` to `digits` significant digits, "n/a" when the figure is undefined (a loop that never settled)."""
+    return "n/a" if value is None else float(f"{value:.{digits}g}")
+
+
 def _comparison_section(report: Report, linear: dict[str, Any], diagnosed: dict[str, Any]) -> None:
     """Side by side: the controllers on the linear model and on the diagnosed model."""
     rows = []
@@ -456,14 +506,14 @@ def _comparison_section(report: Report, linear: dict[str, Any], diagnosed: dict[
             s = entry["summary"]
             rows.append({"controller": name.upper() + (" + compensation" if s.get("compensated") else ""),
                          "designed on": variant, "passed": s["passed"], "loop specs met": s["loop_specs_met"],
-                         "settling time [s]": float(f"{s['settling_time']:.4g}"),
-                         "overshoot %": float(f"{s['overshoot_pct']:.3g}"),
-                         "steady-state error [rad]": float(f"{s['steady_state_error']:.3g}"),
-                         "IAE [rad s]": float(f"{s['iae']:.4g}"),
-                         "load step: settling [s]": float(f"{s['disturbance']['settling_time']:.4g}"),
-                         "load step: peak error [rad]": float(f"{s['disturbance']['peak_error']:.3g}"),
-                         "load step: IAE [rad s]": float(f"{s['disturbance']['iae']:.4g}"),
-                         "deadline miss rate": float(f"{s['deadline_miss_rate']:.2g}")})
+                         "settling time [s]": _num(s["settling_time"], 4),
+                         "overshoot %": _num(s["overshoot_pct"], 3),
+                         "steady-state error [rad]": _num(s["steady_state_error"], 3),
+                         "IAE [rad s]": _num(s["iae"], 4),
+                         "load step: settling [s]": _num(s["disturbance"]["settling_time"], 4),
+                         "load step: peak error [rad]": _num(s["disturbance"]["peak_error"], 3),
+                         "load step: IAE [rad s]": _num(s["disturbance"]["iae"], 4),
+                         "deadline miss rate": _num(s["deadline_miss_rate"], 2)})
     report.add_table("What the diagnosis bought: closed loop on the FMU with friction", rows,
                      highlight={**{(i, "passed"): r["passed"] for i, r in enumerate(rows)},
                                 **{(i, "loop specs met"): r["loop specs met"] for i, r in enumerate(rows)}},

@@ -169,14 +169,14 @@ def _effect_line(effect: Mapping[str, Any]) -> str:
 
 
 def _errors_table(errors: Mapping[str, Mapping[str, float | None]]) -> str:
-    """Rows (before, after...) by signals; a later row's cell is green where it is lower than the first row's."""
+    """Rows (before, after...) by signals; a later row's cell is green where it is lower than the first row's, red
+    where it is higher (as shown, to three digits: an unchanged figure is not marked)."""
     labels = list(errors)
     signals = list(dict.fromkeys(k for values in errors.values() for k in values))
     rows = [{"": label, **{k: "n/a" if errors[label].get(k) is None else float(f"{errors[label][k]:.3g}")
                            for k in signals}} for label in labels]
-    first = errors[labels[0]]
-    marks = {(i, k): errors[label][k] < first[k] for i, label in enumerate(labels[1:], start=1) for k in signals
-             if errors[label].get(k) is not None and first.get(k) is not None}
+    marks = {(i, k): rows[i][k] < rows[0][k] for i in range(1, len(rows)) for k in signals
+             if "n/a" not in (rows[i][k], rows[0][k]) and rows[i][k] != rows[0][k]}
     return html_table(rows, highlight=marks)
 
 
@@ -219,7 +219,7 @@ def summary_box(*, plant: str | None = None, data: str | None = None, context: S
         (why); None leaves the row out.
     errors : mapping of row label to {signal: value}, optional
         The error before and after (or any rows compared with the first), by signal: a later row's cell is green
-        where it is lower than the first row's, red where it is not.
+        where it is lower than the first row's, red where it is higher.
     error_label : str
         What `errors` measures, e.g. "free-run NRMSE, % (lower is better)".
     verdicts : sequence of dict, optional

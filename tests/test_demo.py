@@ -6,10 +6,13 @@ import html
 import re
 
 import pytest
+from summary_checks import summary_rows
 
 from controllers.base import load_controller
 from controllers.compensation import EffectCompensation
 from cosim.demo import run_demo, summary_lines
+from cosim.report import value_with_error
+from cosim.study.paper import STATES
 
 FRICTION = 100.0
 #: Specs on the computer, not the loop: a busy machine (tests run in parallel) preempts the loop now and then.
@@ -75,6 +78,31 @@ def test_one_report_and_the_summary(demo):
     assert {"passed", "settling_time", "overshoot_pct", "steady_state_error", "file"} <= set(demo["controllers"]["mpc"])
     lines = "\n".join(summary_lines(demo))
     assert "diagnosis: found coulomb_friction on omega_m" in lines and "PID + compensation designed on" in lines
+
+
+@pytest.mark.slow
+def test_the_report_opens_with_the_headline(demo):
+    rows = summary_rows(open(demo["report"], encoding="utf-8").read())
+    assert rows["Plant"].startswith("two_mass_servo.fmu (two_mass_servo, FMI 2.0, co-simulation)")
+    assert f"Coulomb friction Fc = {FRICTION:g} N m" in rows["Plant"]
+    assert rows["Data"].startswith(f"data_friction_noisy.csv: {demo['samples']} samples, 4 s at 0.443 ms (2257 Hz)")
+    effect = demo["diagnosis"]["effects"][0]
+    fc = value_with_error(effect["parameters"]["Fc"], effect["uncertainty"]["Fc"], "N m")
+    assert rows["Found"].startswith(f"coulomb_friction on omega_m: Fc = {fc} (true {FRICTION:g} N m)")
+    assert "theta_m omega_m theta_L omega_L mean before " in rows["Error"]
+    before, after = (row.split() for row in rows["Error"].split(" before ")[1].split(" after "))
+    for cells, figures in ((before, demo["diagnosis"]["before"]), (after, demo["diagnosis"]["after"])):
+        expected = [figures["per_state"][s]["nrmse_pct"] for s in STATES] + [figures["nrmse_pct"]]
+        assert [float(c) for c in cells] == pytest.approx(expected, rel=5e-3)
+    verdicts = rows["Verdicts"]
+    for name, group, variant in (("pid", "controllers", "linear"), ("mpc", "controllers", "linear"),
+                                 ("pid", "controllers_diagnosed", "diagnosed"),
+                                 ("mpc", "controllers_diagnosed", "diagnosed")):
+        c = demo[group][name]
+        label = f"{name.upper()}{' + compensation' if c.get('compensated') else ''}, designed on the {variant} model"
+        assert f"{label} " in verdicts
+        assert verdicts.split(f"{label} ")[1].split()[2] == ("PASSED" if c["passed"] else "FAILED")
+    assert rows["Time"].endswith(" s)") and "(diagnosis " in rows["Time"]
 
 
 @pytest.mark.slow

@@ -4,11 +4,13 @@ panels under comparisons; and the results with a report show as a small HTML tab
 
 import numpy as np
 import pytest
-from diagnose_fixtures import coulomb_mass
+from diagnose_fixtures import coulomb_mass, write_csv
 from loop_fixtures import StateFeedback
 from matplotlib.colors import same_color
 from matplotlib.figure import Figure
+from summary_checks import summary_rows
 
+from cosim.data.datafile import load_data
 from cosim.data.plots import plot_trajectory
 from cosim.data.trajectory import Trajectory
 from cosim.diagnose import diagnose
@@ -17,7 +19,7 @@ from cosim.identify.compare import compare
 from cosim.identify.model import IdentifiedModel
 from cosim.loop.closed_loop import closed_loop
 from cosim.loop.plots import plot_closed_loop
-from cosim.report import Report, html_table
+from cosim.report import Report, html_table, value_with_error
 from cosim.study.reproduce import plot_r2_vs_noise
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -131,6 +133,28 @@ def test_the_diagnosis_figures_and_its_html(friction_diagnosis, tmp_path):
     assert same_color(line(runs.axes[0], "model after").get_color(), COLOURS["after"])
     text = report._repr_html_()
     assert "<table>" in text and "coulomb_friction" in text and "NRMSE %" in text and "Fc" in text
+
+
+def test_the_diagnosis_report_opens_with_its_summary(friction_diagnosis, tmp_path):
+    report = friction_diagnosis
+    data = report.data
+    csv = write_csv(tmp_path / "mass.csv", {"t": data.time, **{name: data[name] for name in ("x", "v", "u")}})
+    path = report.write_report(tmp_path / "diagnosis.html", seconds=4.5, records=[load_data(csv, time="t")],
+                               model_from="from linear.json")
+    rows = summary_rows(path)
+    assert rows["Plant"] == "measured data: mass.csv (no plant model: the diagnosis reads the data alone)"
+    assert rows["Data"].startswith("mass.csv: 3001 samples, 3 s at 1 ms (1000 Hz); noise, estimated from second "
+                                   "differences, % of each state's std: x ")
+    assert rows["Model"] == "from linear.json: 2 states (x, v), inputs u, 3 terms"
+    fc = report.effects[0]
+    assert rows["Found"].startswith("coulomb_friction on v: Fc = "
+                                    + value_with_error(fc.parameters["Fc"], fc.uncertainty["Fc"]))
+    figures = [[report.before["per_state"][s]["nrmse_pct"] for s in ("x", "v")] + [report.before["nrmse_pct"]],
+               [report.after["per_state"][s]["nrmse_pct"] for s in ("x", "v")] + [report.after["nrmse_pct"]]]
+    numbers = [" ".join(f"{float(f'{v:.3g}'):.6g}" for v in row) for row in figures]
+    assert rows["Error"] == ("free-run NRMSE, % of each state's spread, against the data (lower is better) x v mean "
+                             f"before {numbers[0]} after {numbers[1]}")
+    assert rows["Time"] == "4.5 s" and "Verdicts" not in rows
 
 
 def test_the_r2_figure_shows_the_misfit_on_a_log_scale(tmp_path):

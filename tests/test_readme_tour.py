@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from summary_checks import summary_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -89,7 +90,7 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster, monkeypatch):
         outputs[line] = result.stdout
     # the data file is a plain table another tool reads
     data = pd.read_csv(tmp_path / "data.csv")
-    assert list(data.columns) == ["time", "Tm", "TL", "theta_m", "omega_m", "theta_L", "omega_L"]
+    assert list(data.columns) == ["time", "Tm", "theta_m", "omega_m", "theta_L", "omega_L"]  # TL not driven: left
     assert json.loads((tmp_path / "data.meta.json").read_text())["units"]["theta_m"] == "rad"
     np.testing.assert_array_equal(pd.read_csv(tmp_path / "replay.csv")["Tm"], data["Tm"])
     # the identified model is stable, the MPC and the PID designed on it pass their specs on the FMU
@@ -105,6 +106,12 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster, monkeypatch):
     assert f"run on {cluster}" in dask and "run on tcp://" not in local
     diagnosis = json.loads(next(out for line, out in outputs.items() if "--report diagnosis.html" in line))
     assert diagnosis["after"]["nrmse_pct"] <= diagnosis["before"]["nrmse_pct"]
+    # every report opens with its summary box, with the time the command measured
+    box = summary_rows(tmp_path / "diagnosis.html")
+    assert box["Plant"].startswith("two_mass_servo.fmu (") and box["Data"].startswith("data.csv: 9029 samples")
+    box = summary_rows(tmp_path / "validation.html")
+    assert box[""] == "Summary PASSED" and box["Plant"].endswith("; set: Fc=100") and box["Time"].endswith(" s")
+    assert summary_rows(tmp_path / "paper-repro" / "report.html")["Data"].startswith("12 cases: square and sine")
     two = next(out for line, out in outputs.items() if "run1.csv run2.csv" in line)
     assert two.startswith("found coulomb_friction on omega_m")  # the records' Fc = 100 N m, within 5 %
     assert float(re.search(r"Fc=([\d.]+)", two).group(1)) == pytest.approx(100.0, rel=0.05)

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from summary_checks import summary_rows
 
 from cosim.cli import main
 from cosim.identify.model import IdentifiedModel
@@ -74,3 +75,9 @@ def test_reproduce_paper_json_and_files(tmp_path):
                  "report.html"):
         assert (out / name).stat().st_size > 0, name
     assert "Table 1" in (out / "report.html").read_text()
+    rows = summary_rows(out / "report.html")  # the headline first: the cases, the deviation beside Table 1, verdicts
+    assert rows["Data"].startswith("2 cases: sine excitation × noise 0 %, 30 % × 1 seed(s); 10 s each")
+    study, ours = (row.split() for row in rows["Error"].split(" the study (Table 1) ")[1].split(" cosim "))
+    assert [float(v) for v in study] == [float(f"{STUDY_TABLE1[0.3][s]:.3g}") for s in STATES]
+    assert [float(v) for v in ours] == pytest.approx([summary["max_dev_pct"][s][1] for s in STATES], rel=5e-3)
+    assert "R² ≥ 0.99 up to 30 % noise (the study's claim) PASSED PASSED PASSED" in rows["Verdicts"]

@@ -91,7 +91,7 @@ def _summary(verdict: Verdict, controller: Any, robustness: Any, fmu: Any, kind:
                     + f"; {len(specs)} specs: {', '.join(specs)}"))
     more = []
     gaps = [(s.name, r.metrics.get("model_discrepancy_pct")) for s, r in zip(verdict.scenarios, verdict.results,
-                                                                              strict=True)]
+                                                                              strict=True) if s.kind != "disturbance"]
     gaps = [(name, g) for name, g in gaps if g is not None and math.isfinite(g)]
     if gaps:
         more.append(("Model vs FMU", "the design model's loop differs from the FMU's by "

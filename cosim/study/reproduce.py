@@ -232,7 +232,7 @@ def _summary_facts(records: pd.DataFrame, summary: dict, sweep: SweepResult, set
     """The report's summary box: the plant and the cases run, the maximum deviation beside the study's at the
     highest noise level it published, whether cosim beats Table 1 and meets R² >= 0.99 per noise level, the time."""
     levels = summary["noise_levels"]
-    excitations = sorted(set(records["excitation"])) if len(records) else []
+    excitations = list(dict.fromkeys(records["excitation"])) if len(records) else []
     x0 = ", ".join(f"{v:g}" for v in STUDY_X0.values())
     facts: dict[str, Any] = {
         "plant": f"the bundled two_mass_servo FMU (default parameters) from the study's initial state X0 = [{x0}] "
