@@ -30,7 +30,7 @@ def main() -> dict:
                     dt=STUDY_DT).with_noise(0.05, seed=0)
     model = to_statespace(SINDYc(**STUDY_SETTINGS).fit(data, states=list(STATES), inputs=["Tm"]).model_)
     controllers = {
-        "pid": tune_pid(model, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000,
+        "pid": tune_pid(model, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", u_min=-5000,
                         u_max=5000),
         "mpc": MPC(model, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"],
                    tracked=["theta_L"], u_min=-5000, u_max=5000),
