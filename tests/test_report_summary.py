@@ -4,7 +4,10 @@ title, in a file that needs nothing beside it. The demo's, the diagnosis's and t
 checked on their own runs in test_demo.py, test_figures.py and test_reproduce.py; the CLI's in test_readme_tour.py.
 """
 
+import importlib.util
 import json
+import re
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -88,3 +91,20 @@ def test_cosim_validate_report_names_the_fmu_the_settings_and_the_time(pid_file,
     rows = summary_rows(tmp_path / "v.html")
     assert rows[""] == "Summary PASSED" and rows["Plant"].endswith("co-simulation); set: Fc=20")
     assert rows["Verdicts"].endswith("pid PASSED PASSED") and rows["Time"].endswith(" s")
+
+
+def test_the_readme_shows_the_top_of_every_report_and_the_script_shoots_down_to_the_first_section():
+    root = Path(__file__).resolve().parents[1]
+    shown = re.findall(r"\(docs/screenshots/([\w.]+\.png)\)", (root / "README.md").read_text(encoding="utf-8"))
+    assert {"report_top.png", "diagnosis_top.png", "validation_top.png", "reproduce_top.png"} <= set(shown)
+    for name in shown:
+        assert (root / "docs" / "screenshots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    spec = importlib.util.spec_from_file_location("make_screenshots", root / "docs" / "make_screenshots.py")
+    shots = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(shots)
+    assert {name for kind in shots.SHOTS.values() for name, *_ in kind} == set(shown)
+    report = Report("job")
+    report.add_table("First section", [{"a": 1}])
+    report.add_summary(seconds=1.0)
+    page = shots.section_page(report.render(), root, None, shots.FIRST_SECTION)
+    assert "#shot-h1, #shot-h1 ~ * { display: none }" in page and '<h2 id="shot-h1">First section' in page
