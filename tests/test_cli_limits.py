@@ -64,6 +64,10 @@ def test_design_pid_prints_a_short_summary_and_the_json_everything(spring):
     saved = json.loads((folder / "pid.json").read_text())["info"]
     assert code == 0 and set(saved) <= set(info) and len(info) > 40
     assert info["design_step"] == 0.12 and info["delivers_step"] is True
+    code, out, _ = run("design", "mpc", folder / "model.json", "--tracked", "x", "--u-max", "50", "--no-codegen")
+    lines = out.strip().splitlines()
+    assert code == 0 and len(lines) == 3 and lines[0] == "MPC on F -> x (measures x, v); dt 1/2000 s; F in [-50, 50]"
+    assert lines[1].startswith("  horizon 20 moves (0.01 s); solver ") and "(stable)" in lines[2]
 
 
 @pytest.mark.parametrize("dt", ["0", "-1e-3"])

@@ -117,7 +117,7 @@ def test_a_step_the_actuator_cannot_hold_is_a_warning_with_the_step_that_stays_l
     pid = tune_pid(as_statespace(a, b), dt=1 / 2000, tracked="x", u_max=50.0, step=2 * 50.0 / k)
     (warning,) = pid.info["warnings"]
     assert "needs a steady input of 100, beyond the limits [-50, 50]" in warning and "stay linear" in warning
-    assert pid.info["delivers_step"] is None
+    assert pid.info["delivers_step"] is False
 
 
 def test_the_search_predictor_is_the_pid_itself():

@@ -48,6 +48,9 @@ _COARSE = 4
 _COARSE_BEST = 4
 _SAT_WEIGHTS = 3
 _SAT_HORIZONS = 2.0
+#: The longest saturated step stepped in the search [samples]: a loop whose step needs more (a crossover some
+#: 1e-4 of the sample rate) is not tried.
+_SAT_MAX_SAMPLES = 100_000
 
 
 @dataclass(frozen=True)
@@ -302,6 +305,10 @@ def _saturated_check(plant: _Plant, cands: list[_Candidate], demand: _Demand, ma
                     owners.append((i, w, g))
     arr = np.array(rows)
     n = max(2, math.ceil(_SAT_HORIZONS * max(c.horizon for c in todo) / plant.dt))
+    if n > _SAT_MAX_SAMPLES:
+        for c in todo:
+            c.delivers = c.admissible = False
+        return
     y, _ = _saturated_steps(plant, arr[:, :4], arr[:, 4], arr[:, 5], demand.act, n)
     overshoot = np.empty(arr.shape[0])
     settling = np.empty(arr.shape[0])
@@ -346,6 +353,8 @@ def _deliver(plant: _Plant, pm: float, bandwidth: float | None, derivative: bool
         if any(c.delivers for c in best):
             top = i
             break
+        if best and _SAT_HORIZONS * max(c.horizon for c in best) / plant.dt > _SAT_MAX_SAMPLES:
+            break  # lower crossovers step longer still
     if top is None:
         return None, [c for cands in cache.values() for c in cands]
     above = [c for i in range(max(0, top - _COARSE + 1), top) for c in at(i)]

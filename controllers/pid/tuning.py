@@ -460,7 +460,8 @@ def tune_pid(sys: control.StateSpace, *, dt: float, input: str | None = None, tr
     if step is not None:
         report.update(design_step=step, design_step_source=source)
     if act.limited:
-        report.update(design_step=step, design_step_source=source, delivers_step=best.delivers,
+        report.update(design_step=step, design_step_source=source,
+                      delivers_step=False if steady_note is not None else best.delivers,
                       step_overshoot_linear_pct=report.get("step_overshoot_pct"),
                       step_settling_time_linear_s=report.get("step_settling_time_s"))
         if horizon is not None:
@@ -499,15 +500,18 @@ def _limit_notes(report: dict[str, Any], plant: _Plant, step: float | None, stea
     linear = f"steps up to {top:.3g} stay linear" if top is not None and math.isfinite(top) else ""
     notes = []
     if step is None:
-        notes.append(f"{plant.output} integrates {plant.input} (no static gain): no step is derived from the "
-                     f"limits; {linear or 'the input stays within them'}; give step= (--step) to design for a "
-                     "larger one")
+        why = (f"{plant.output} has no steady state for {plant.input} (it integrates it, or drifts)"
+               if _static_gain(plant) is None
+               else f"{plant.input} has no range limit, only a rate limit")
+        notes.append(f"{why}: no step is derived from the limits; {linear or 'the input stays within them'}; "
+                     "give step= (--step) to design for a larger one")
     elif steady_note is not None:
         warns.append(f"{steady_note}; kept the linear design" + (f", {linear}" if linear else ""))
     elif report.get("delivers_step") is False:
-        sat = report.get("step_overshoot_pct")
+        sat, settles = report.get("step_overshoot_pct"), report.get("step_settling_time_s")
         limit = f" and overshoot <= {max_overshoot:g} %" if max_overshoot is not None else ""
+        shown = ("" if sat is None else ", whose step never settles with the limits" if not (
+            settles is not None and math.isfinite(settles)) else f", whose step overshoots {sat:.1f} % with the limits")
         warns.append(f"no robust design delivers a step of {step:.4g} in {plant.output} within the limits{limit}; "
-                     "kept the linear design" + (f", whose step overshoots {sat:.1f} % with the limits"
-                                                 if sat is not None else "") + (f"; {linear}" if linear else ""))
+                     f"kept the linear design{shown}" + (f"; {linear}" if linear else ""))
     return notes
