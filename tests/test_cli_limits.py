@@ -70,6 +70,15 @@ def test_design_pid_prints_a_short_summary_and_the_json_everything(spring):
     assert lines[1].startswith("  horizon 20 moves (0.01 s); solver ") and "(stable)" in lines[2]
 
 
+def test_design_warns_when_the_actuator_cannot_deliver_the_step(spring):
+    folder, _ = spring
+    code, out, err = run("design", "pid", folder / "model.json", "--tracked", "x", "--u-max", "50", "--step", "0.5")
+    assert code == 0 and err.count("\n") == 1
+    assert err.startswith("warning: a step of 0.5 needs a steady input of 101.1, beyond the limits [-50, 50]: no "
+                          "design can hold it; kept the linear design, steps up to ")
+    assert "step 0.5, with the limits: overshoot" in out
+
+
 @pytest.mark.parametrize("dt", ["0", "-1e-3"])
 def test_design_refuses_a_sample_time_that_is_not_positive(spring, dt):
     folder, _ = spring
