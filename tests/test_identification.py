@@ -179,7 +179,7 @@ def test_differentiation_methods_known_answer(method):
 
 # ------------------------------------------------------------------------------------------ bad input
 def test_unknown_column_lists_available(clean):
-    with pytest.raises(UnknownVariableError, match="no column 'speed'.*available: Tm, TL, theta_m"):
+    with pytest.raises(UnknownVariableError, match="no column 'speed'.*available: Tm, theta_m"):
         SINDYc().fit(clean["square"], states=["theta_m", "speed"], inputs=["Tm"])
 
 
