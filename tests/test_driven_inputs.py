@@ -117,6 +117,13 @@ def test_closed_loop_drives_only_the_controllers_input(sliding):
         old = closed_loop(pid, plant, reference=0.5, duration=5.0, model=None)
     assert abs(old.fmu["position"][-1]) < 0.05  # the force cancelled: the mass rings down to rest
     assert any("drives force.f, which nobody in the loop drives" in note for note in old.notes)
+    # validation runs through closed_loop: the same rule, on Model Exchange too
+    from cosim.loop.validation import validate
+
+    verdict = validate(sliding[2], pid, "step:amp=0.5,duration=5", ["steady_state_error<=0.002"], model=None,
+                       kind="me")
+    assert verdict.passed, verdict.reasons
+    assert verdict.results[0].fmu.meta["left_inputs"] == {"force.f": 0.0}
 
 
 def test_fmu_info_says_which_inputs_a_run_drives(sliding, force):

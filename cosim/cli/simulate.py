@@ -191,7 +191,7 @@ def _recorded(fmu_path: Path, input_file: str, time_column: str | None, hold: st
 
 @click.group()
 def data() -> None:
-    """Inspect data files (trajectories as CSV or Parquet)."""
+    """Inspect data files (trajectories as CSV, Parquet or MATLAB .mat)."""
 
 
 @data.command("info")

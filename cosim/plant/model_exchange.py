@@ -18,7 +18,9 @@ request to terminate, and the solver's re-initialisation after each event.
 A value set between two steps (an input, a tunable parameter) that changes the FMU's value is an event at the
 current time, as an input event is in FMPy: the FMU enters Event Mode before the value is set (so discrete
 inputs can be set too), and the next :meth:`~ModelExchangeSlave.doStep` first iterates the event, then
-re-initialises the solver, so that CVode never carries the old input past the communication point.
+re-initialises the solver, so that CVode never carries the old input past the communication point. Only the
+inputs its :class:`~cosim.plant.fmu_plant.FmuPlant` drives are set; an input nobody drives keeps the value it has
+after initialisation, as in FMPy's ``simulateME``.
 """
 
 from __future__ import annotations
