@@ -39,7 +39,7 @@ def identified(fmu):
 
 @pytest.fixture(scope="module")
 def controllers(identified):
-    pid = tune_pid(identified, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", **LIMITS)
+    pid = tune_pid(identified, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", **LIMITS)
     mpc = MPC(identified, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"],
               tracked=["theta_L"], **LIMITS)
     return {"pid": pid, "mpc": mpc}

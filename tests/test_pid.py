@@ -87,13 +87,13 @@ def step_figures(y: np.ndarray, h: float, r: float = STEP) -> tuple[float, float
 @pytest.fixture(scope="module")
 def servo_pid() -> PID:
     """The default tune (phase margin 60 deg) on the two-mass servo, Tm -> theta_L, |Tm| <= 5000 N m."""
-    return tune_pid(two_mass(), dt=STUDY_DT, input="Tm", output="theta_L", u_min=-5000.0, u_max=5000.0)
+    return tune_pid(two_mass(), dt=STUDY_DT, input="Tm", tracked="theta_L", u_min=-5000.0, u_max=5000.0)
 
 
 @pytest.fixture(scope="module")
 def velocity_pid() -> PID:
     """The default tune with the derivative action from the measured motor speed."""
-    return tune_pid(two_mass(), dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000.0,
+    return tune_pid(two_mass(), dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", u_min=-5000.0,
                     u_max=5000.0)
 
 
@@ -395,7 +395,7 @@ def test_tune_two_mass_servo(servo_pid):
 
 
 def test_tune_ignores_the_constant_input(servo_pid):
-    pid = tune_pid(two_mass(const=True), dt=STUDY_DT, output="theta_L", u_min=-5000.0, u_max=5000.0)
+    pid = tune_pid(two_mass(const=True), dt=STUDY_DT, tracked="theta_L", u_min=-5000.0, u_max=5000.0)
     assert pid.inputs == ("Tm",) and pid.outputs == ("theta_L",)
     assert (pid.kp, pid.ki, pid.kd, pid.tf, pid.b) == pytest.approx(
         (servo_pid.kp, servo_pid.ki, servo_pid.kd, servo_pid.tf, servo_pid.b), rel=1e-9)
@@ -443,13 +443,13 @@ def test_tune_velocity_keeps_the_design_model_and_the_model_order(velocity_pid):
     # the model's order decides the order of the measured outputs, not the order the names were given in
     swapped = control.ss(two_mass().A, two_mass().B, np.eye(4)[[2, 0, 1, 3]], 0, inputs=["Tm", "TL"],
                          outputs=["theta_L", "theta_m", "omega_m", "omega_L"])
-    other = tune_pid(swapped, dt=STUDY_DT, output="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
+    other = tune_pid(swapped, dt=STUDY_DT, tracked="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
     assert other.outputs == ("theta_L", "omega_m")
     assert (other.kp, other.ki, other.kd, other.b) == pytest.approx((pid.kp, pid.ki, pid.kd, pid.b), rel=1e-6)
 
 
 def test_tune_velocity_for_a_bandwidth_and_phase_margin():
-    pid = tune_pid(two_mass(), dt=STUDY_DT, output="theta_L", velocity="omega_m", bandwidth_hz=4.0, phase_margin=55.0)
+    pid = tune_pid(two_mass(), dt=STUDY_DT, tracked="theta_L", velocity="omega_m", bandwidth_hz=4.0, phase_margin=55.0)
     info = pid.info
     assert info["crossover_rad_s"] == pytest.approx(2 * math.pi * 4.0, rel=1e-3)
     assert info["phase_margin_deg"] == pytest.approx(55.0, abs=0.1) and info["closed_loop_stable"]
@@ -459,7 +459,7 @@ def test_tune_velocity_for_a_bandwidth_and_phase_margin():
 
 
 def test_tune_velocity_with_a_computational_delay():
-    pid = tune_pid(two_mass(), dt=STUDY_DT, output="theta_L", velocity="omega_m", delay=1)
+    pid = tune_pid(two_mass(), dt=STUDY_DT, tracked="theta_L", velocity="omega_m", delay=1)
     wc = pid.info["crossover_rad_s"]
     loop = velocity_loop(pid, two_mass(), np.array([wc]))[0] * np.exp(-1j * wc * STUDY_DT)  # times z^-1
     assert abs(loop) == pytest.approx(1.0, rel=1e-6)
@@ -534,7 +534,7 @@ def test_velocity_tune_on_an_identified_like_model(motor_stiffness, load_stiffne
     The tune still meets the spec on the real FMU with and without friction, with margins to spare there."""
     model = two_mass(const=True, motor_stiffness=motor_stiffness, load_stiffness=load_stiffness,
                      input_gain=input_gain)
-    pid = tune_pid(model, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
+    pid = tune_pid(model, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
     assert pid.inputs == ("Tm",) and pid.outputs == ("omega_m", "theta_L")
     assert_sound_on_the_true_plant(pid)
 
@@ -557,7 +557,7 @@ def test_velocity_tune_on_an_identified_model(seed, friction):
                     start=STUDY_X0, parameters={"Fc": friction}).with_noise(0.05, seed=seed)
     model = to_statespace(SINDYc(**STUDY_SETTINGS).fit(data, states=list(STATES), inputs=["Tm"]).model_)
     assert model.B[1, 0] * 250.0 > 1.35  # the identified input gain is far off 1/Jm
-    pid = tune_pid(model, dt=STUDY_DT, input="Tm", output="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
+    pid = tune_pid(model, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m", u_min=-5000.0, u_max=5000.0)
     assert pid.info["crossover_rad_s"] <= 0.7 * pid.info["antiresonance_rad_s"]
     assert_sound_on_the_true_plant(pid)
 
@@ -655,7 +655,7 @@ def test_tuner_bad_input():
     with pytest.raises(UnknownVariableError, match="constant term"):
         tune_pid(two_mass(const=True), dt=STUDY_DT, input="const")
     with pytest.raises(UnknownVariableError, match="no output named 'theta'"):
-        tune_pid(plant, dt=STUDY_DT, output="theta")
+        tune_pid(plant, dt=STUDY_DT, tracked="theta")
     with pytest.raises(InvalidSettingError, match="positive number"):
         tune_pid(plant, dt=0.0)
     with pytest.raises(InvalidSettingError, match="not both"):
@@ -681,7 +681,7 @@ def test_tuner_bad_input():
 ])
 def test_tuner_bad_velocity(kwargs, error, words):
     with pytest.raises(error, match=words) as err:
-        tune_pid(two_mass(), dt=STUDY_DT, output="theta_L", **kwargs)
+        tune_pid(two_mass(), dt=STUDY_DT, tracked="theta_L", **kwargs)
     assert "\n" not in str(err.value)
     single = control.ss(two_mass().A, two_mass().B, np.eye(4)[[2]], 0, inputs=["Tm", "TL"], outputs=["theta_L"])
     with pytest.raises(UnknownVariableError, match=r"its outputs are \['theta_L'\]"):
@@ -703,7 +703,7 @@ def test_tuner_says_what_is_reachable():
 def test_tuner_says_what_is_reachable_with_a_velocity():
     with pytest.raises(ControllerError, match=r"no PI with velocity feedback gives crossover 400 rad/s .* omega_m fed "
                                               r"back: .* highest crossover is about") as err:
-        tune_pid(two_mass(), dt=STUDY_DT, output="theta_L", velocity="omega_m", bandwidth=400.0)
+        tune_pid(two_mass(), dt=STUDY_DT, tracked="theta_L", velocity="omega_m", bandwidth=400.0)
     assert "\n" not in str(err.value)
 
 
