@@ -136,6 +136,7 @@ def test_a_mat_matrix_column_drives_the_fmu_as_the_csv_did(fmu, tmp_path):
     bad = CliRunner().invoke(cli, ["simulate", str(fmu), "--input", "Tm=data[:,1]", "--duration", "0.1", "--dt",
                                    "0.01"])
     assert bad.exit_code == 2 and bad.stderr.count("\n") == 1, bad.output
+    assert "an expression of a file's variables needs --input-file DATA" in bad.stderr
     bad = CliRunner().invoke(cli, ["simulate", str(fmu), "--input-file", str(tmp_path / "rig.mat"), "--input",
                                    "Tm=data[:,5]", "--dt", "1/2257"])
     assert bad.exit_code == 2 and "data is 1129 x 3, column index must be 0..2" in bad.stderr, bad.output

@@ -76,6 +76,11 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     level = parse_number(noise, what="--noise")
     signals: dict = dict(_pairs(inputs, "--input"))
     t0, note = None, ""
+    expression = next((f"{n}={text}" for n, text in signals.items()
+                       if not _is_signal_spec(text) and any(c in text for c in "[]*/()")), None)
+    if expression and not input_file:
+        raise InvalidSettingError(f"--input {expression}: an expression of a file's variables needs --input-file DATA; "
+                                  "without one, give a signal spec such as square:amp=500,freq=2 or a number")
     if input_file:
         record_signals, t0, step, span, note = _recorded(fmu_path, input_file, time_column, hold, dt, duration,
                                                          signals)
