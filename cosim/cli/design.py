@@ -10,6 +10,7 @@ import click
 from ..errors import InvalidSettingError
 from ..numbers import parse_number
 from ._command import _deprecated, _emit, _friendly, _names, _ranges
+from ._outputs import check_outputs
 
 __all__ = ["design"]
 
@@ -204,6 +205,7 @@ def design_pid(model_path: str, input_name: str | None, output_name: str | None,
     if len(files) > 1:
         raise InvalidSettingError(f"one controller file, please: -o/--output was given {', '.join(files)}")
     out = files[0] if files else None
+    check_outputs({"-o/--output": [out]}, {"-o/--output": (".json",)})
     lo, hi = _bounds(u_min, u_max)
     step = _limit(step_text, "--step")
     if step is not None and not (math.isfinite(step) and step != 0):
@@ -268,6 +270,7 @@ def design_mpc(model_path: str, input_names: str | None, measured: str | None, t
         if out:
             raise InvalidSettingError("one controller file, please: give -o/--output only")
         out = old_out
+    check_outputs({"-o/--output": [out]}, {"-o/--output": (".json",)})
     sys_c, dt, _ = _design_model(model_path, dt_text)
     lo, hi = _bounds(u_min, u_max)
     weights = {key: parse_number(text, what=f"--{key.replace('_', '-')}")

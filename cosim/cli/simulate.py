@@ -10,6 +10,7 @@ import numpy as np
 from ..errors import InvalidSettingError
 from ..numbers import parse_number
 from ._command import _emit, _friendly, _names, _pairs, _resolve_fmu, _settings
+from ._outputs import check_outputs
 
 __all__ = ["data", "simulate"]
 
@@ -71,6 +72,7 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     """
     from ..data.simulation import simulate as run
 
+    check_outputs({"-o/--output": [out]}, {"-o/--output": (".csv", ".parquet", ".pq", ".mat")})
     fmu_path = _resolve_fmu(path)
     parameters, start = _start_values(fmu_path, _settings(sets, "--set"), _settings(starts, "--start"))
     level = parse_number(noise, what="--noise")

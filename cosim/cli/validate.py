@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ._command import _emit, _friendly, _names, _ranges, _resolve_fmu, _settings
+from ._outputs import check_outputs
 
 __all__ = ["validate_command"]
 
@@ -88,6 +89,7 @@ def validate_command(fmu_path: str, controller_path: str, scenarios: tuple[str, 
     from ..loop.validation_report import write_validation_report
 
     started = time.perf_counter()
+    check_outputs({"--report": [report_path]}, {"--report": (".html", ".htm")})
 
     scenario_list = [parse_scenario(s) for s in scenarios]
     spec_list = [parse_spec(s) for s in specs]  # refused before anything runs

@@ -248,7 +248,8 @@ class FmuPlant(_Stepping):
             if only_parameters and var.name not in self._param_names:
                 raise UnknownVariableError(
                     f"{name!r} is not a parameter of {self.path.name} (its causality is {var.causality}); "
-                    f"set start values with start=... Parameters: {', '.join(self._param_names) or 'none'}")
+                    f"set start values with start=... (--start on the command line). Parameters: "
+                    f"{', '.join(self._param_names) or 'none'}")
             if not only_parameters and var.start is None and var.causality != "input":
                 raise InvalidSettingError(f"{name!r} of {self.path.name} has no start value to set "
                                           f"(causality {var.causality}, initial {var.initial})")
