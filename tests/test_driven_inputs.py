@@ -134,6 +134,6 @@ def test_fmu_info_says_which_inputs_a_run_drives(sliding, force):
     info = json.loads(runner.invoke(cli, ["fmu", "info", str(sliding[2]), "--input-file", str(path), "--json"]).stdout)
     assert info["driven"] == ["extForce"] and info["left"] == ["force.f"]
     text = runner.invoke(cli, ["fmu", "info", str(sliding[3]), "--input", "force.f=3"]).stdout
-    assert "a run with these options drives force.f; leaves extForce to the FMU after their start values" in text
+    assert "a run with these options drives force.f; leaves extForce to the FMU (start value set once)" in text
     bad = runner.invoke(cli, ["fmu", "info", str(sliding[3]), "--input", "extforce=3"])
     assert bad.exit_code == 2 and "has no input named 'extforce'" in bad.stderr and bad.stderr.count("\n") == 1

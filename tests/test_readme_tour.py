@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import scipy.io
 from summary_checks import summary_rows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,6 +94,13 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster, monkeypatch):
     assert list(data.columns) == ["time", "Tm", "theta_m", "omega_m", "theta_L", "omega_L"]  # TL not driven: left
     assert json.loads((tmp_path / "data.meta.json").read_text())["units"]["theta_m"] == "rad"
     np.testing.assert_array_equal(pd.read_csv(tmp_path / "replay.csv")["Tm"], data["Tm"])
+    # the same replay for MATLAB: a variable per signal, the values of the CSV's
+    mat = scipy.io.loadmat(tmp_path / "replay.mat")
+    for name in data.columns:
+        np.testing.assert_array_equal(mat[name].ravel(), pd.read_csv(tmp_path / "replay.csv")[name])
+    # any FMU: validate's checks come from the plant and the design, said with their reasons
+    exported = next(out for line, out in outputs.items() if line.startswith("cosim validate model.fmu"))
+    assert exported.startswith("PASSED") and "input_limit<=5000: the controller's limit on Tm" in exported
     # the identified model is stable, the MPC and the PID designed on it pass their specs on the FMU
     model = json.loads((tmp_path / "model.json").read_text())
     assert model["meta"]["stable"] is True

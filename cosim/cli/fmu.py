@@ -109,7 +109,7 @@ def fmu_info(path: str, show_all: bool, inputs: tuple[str, ...], input_file: str
         if key == "inputs":
             lines.append(f"  {_RULE}" if not (inputs or input_file) else
                          f"  a run with these options drives {', '.join(driven[0]) or 'no input'}"
-                         + (f"; leaves {', '.join(driven[1])} to the FMU after their start values" if driven[1]
+                         + (f"; leaves {', '.join(driven[1])} to the FMU (start value set once)" if driven[1]
                             else ""))
     lines.append(f"  states: {', '.join(states) or 'not declared'}")
     _emit(as_json, info, "\n".join(lines))

@@ -171,8 +171,10 @@ def _step(controller: Any, md: Any) -> tuple[float, str]:
     if step:
         return step, "the step whose steady input takes half the controller's input range"
     step = _number(info.get("linear_step_max"))
-    if step:
-        return step, "the largest step the design keeps within its input limits"
+    if step:  # rounded down to two digits: a step people write, still within the limits
+        scale = 10.0 ** (math.floor(math.log10(abs(step))) - 1)
+        return float(f"{math.floor(abs(step) / scale) * scale:.2g}"), ("a step the design keeps within its input "
+                                                                        f"limits (the largest is {step:.4g})")
     var = _declared(md, controller.tracked[0])
     nominal = _number(getattr(var, "nominal", None))
     if nominal:
