@@ -30,6 +30,7 @@ from ..errors import InvalidSettingError, SimulationTerminated
 from ..numbers import WrittenNumber, check_memory
 from ..plant._variables import kind_of
 from ..plant.fmu_plant import FmuPlant
+from ..plant.model_description import variable_unit
 from .signals import Signal, parse_signal
 from .trajectory import Trajectory
 
@@ -96,13 +97,6 @@ def sample_input(name: str, spec: InputSpec, t: np.ndarray, *, maximum: float | 
         bad = int(np.argmax(~np.isfinite(values)))
         raise InvalidSettingError(f"input {name} is not finite at t={t[bad]:.9g} s; inputs must be finite")
     return values
-
-
-def _unit(var: Any) -> str:
-    unit = getattr(var, "unit", None)
-    if not unit and getattr(var, "declaredType", None) is not None:
-        unit = getattr(var.declaredType, "unit", None)
-    return unit or ""
 
 
 def _written(plant: FmuPlant, values: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -261,7 +255,7 @@ def simulate(
         roles = {name: "input" for name in driven}
         roles.update({name: "state" if name in plant.states else "output" for name in plant.outputs})
         types = plant.types
-        units = {name: _unit(plant.variable(name)) for name in names}
+        units = {name: variable_unit(plant.variable(name)) for name in names}
         meta = {
             "source": "fmu",
             "fmu": plant.path.name,

@@ -49,6 +49,7 @@ from tqdm.auto import tqdm
 from ..data.trajectory import Trajectory
 from ..errors import ControllerError, CosimError, InvalidSettingError, SimulationTerminated, UnknownVariableError
 from ..plant.fmu_plant import FmuPlant
+from ..plant.model_description import variable_unit
 from .response import jsonable_metrics, response_metrics
 
 __all__ = ["ClosedLoopResult", "ModelPlant", "closed_loop"]
@@ -513,9 +514,9 @@ def _units(fmu: Any) -> dict[str, str]:
     """The unit of each of the plant's variables that declares one (its own or its type's)."""
     units = {}
     for name, var in getattr(fmu, "variables", {}).items():
-        unit = getattr(var, "unit", None) or getattr(getattr(var, "declaredType", None), "unit", None)
+        unit = variable_unit(var)
         if unit:
-            units[name] = str(unit)
+            units[name] = unit
     return units
 
 

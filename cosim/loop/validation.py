@@ -49,7 +49,7 @@ from ..errors import SpecError
 from ..numbers import parse_number
 from .closed_loop import ClosedLoopResult, closed_loop
 from .response import jsonable_metrics
-from .validation_defaults import TELESCOPE_SPECS, check_parameter_names, default_checks
+from .validation_defaults import SCENARIO_KEYS, TELESCOPE_SPECS, check_parameter_names, default_checks
 
 __all__ = [
     "KNOWN_METRICS",
@@ -216,8 +216,8 @@ def disturbance_step(amplitude: float, *, input: str = "TL", at: float = 0.5, du
     return Scenario("disturbance", amplitude, at=at, duration=duration, input=input, **options)
 
 
-_SCENARIO_KEYS = {"amp": "amplitude", "amplitude": "amplitude", "at": "at", "duration": "duration", "rate": "rate",
-                  "input": "input", "setpoint": "setpoint", "band": "band", "name": "name"}
+# the scenario's keys (validation_defaults.SCENARIO_KEYS, which its messages list) -> Scenario fields
+_SCENARIO_KEYS = {**{key: key for key in SCENARIO_KEYS}, "amp": "amplitude", "amplitude": "amplitude"}
 
 
 def parse_scenario(text: str, *, parameters: Mapping[str, float] | None = None) -> Scenario:

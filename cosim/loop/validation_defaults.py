@@ -82,7 +82,9 @@ def _description(fmu: Any, kind: str | None = None) -> Any:
 
 def fmu_parameters(md: Any) -> list[str]:
     """Names of the parameters an FMU lets a run set (causality parameter, fixed or tunable), in its order."""
-    return [v.name for v in md.modelVariables if v.causality == "parameter" and v.variability in ("fixed", "tunable")]
+    from ..plant.model_description import parameter_names
+
+    return parameter_names(md)
 
 
 def check_parameter_names(fmu: Any, scenarios: Iterable[Any], parameters: Mapping[str, Any] | None = None, *,
@@ -117,8 +119,9 @@ def _declared(md: Any, name: str) -> Any:
 
 
 def _unit(md: Any, name: str) -> str:
-    var = _declared(md, name)
-    unit = getattr(var, "unit", None) or getattr(getattr(var, "declaredType", None), "unit", None)
+    from ..plant.model_description import variable_unit
+
+    unit = variable_unit(_declared(md, name))
     return f" {unit}" if unit else ""
 
 

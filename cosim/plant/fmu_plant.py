@@ -54,7 +54,7 @@ from ._fmi_callbacks import fmi2_callbacks
 from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
 from ._stepping import _input_value, _Stepping
 from ._variables import NUMERIC, Signal, array_value, expand_signals, unknown_element
-from .model_description import _close_matches, interface_kind, open_model_description
+from .model_description import _close_matches, interface_kind, open_model_description, parameter_names
 from .model_exchange import ModelExchangeSlave
 
 __all__ = ["FmuPlant"]
@@ -159,8 +159,7 @@ class FmuPlant(_Stepping):
         self.inputs = tuple(self._choose(inputs, all_in, "input"))
         self.outputs = tuple(recordable if outputs == "all" else all_out if outputs is None
                              else self._choose(outputs, recordable, "variable"))
-        self._param_names = tuple(v.name for v in md.modelVariables
-                                  if v.causality == "parameter" and v.variability in ("fixed", "tunable"))
+        self._param_names = tuple(parameter_names(md))
         derivative_of = {}
         for v in md.modelVariables:
             if getattr(v, "derivative", None) is not None:

@@ -19,7 +19,7 @@ from ..errors import FmuFormatError, FmuNotFoundError, FmuPlatformError, Invalid
 if TYPE_CHECKING:
     from fmpy.model_description import ModelDescription
 
-__all__ = ["KINDS", "interface_kind", "open_model_description"]
+__all__ = ["KINDS", "interface_kind", "open_model_description", "parameter_names", "variable_unit"]
 
 #: The FMI interfaces cosim drives: co-simulation (the FMU integrates itself) and Model Exchange (FMPy's solvers).
 KINDS = ("cs", "me")
@@ -113,6 +113,16 @@ def open_model_description(fmu: str | os.PathLike, kind: str | None = None) -> M
         raise FmuPlatformError(f"{path} has no binary for this platform ({platform}; it has: {has}); "
                                "export it for this platform")
     return md
+
+
+def parameter_names(md: ModelDescription) -> list[str]:
+    """The parameters a run may set (causality parameter, variability fixed or tunable), in declaration order."""
+    return [v.name for v in md.modelVariables if v.causality == "parameter" and v.variability in ("fixed", "tunable")]
+
+
+def variable_unit(var: object) -> str:
+    """A model variable's unit: its own, else its declared type's, else ``""``."""
+    return str(getattr(var, "unit", None) or getattr(getattr(var, "declaredType", None), "unit", None) or "")
 
 
 def _close_matches(name: str, candidates: Iterable[str]) -> str:
