@@ -93,7 +93,7 @@ from ._trials import (
 )
 from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport, _figures, _message
-from .effects import EFFECTS, effect_names
+from .effects import EFFECTS, Effect, effect_names
 from .residuals import ResidualAnalysis, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit
 
@@ -225,7 +225,8 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
              effects: str | Sequence[str] = "all", max_effects: int = 3, alpha: float = ALPHA,
              bic_margin: float = BIC_MARGIN, min_size: float = MIN_SIZE, reference: Trajectory | None = None,
              x0: str | Sequence[float] = "estimate", noise: Mapping[str, float] | None = None,
-             held_out: bool = True, decimate: int | str = "auto", progress: bool | None = None) -> DiagnosisReport:
+             held_out: bool = True, decimate: int | str = "auto", progress: bool | None = None,
+             candidates: Sequence[Effect] = ()) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
@@ -270,6 +271,9 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
         rate, never below 4000 samples (:mod:`~cosim.diagnose._analysis_rate`); 1: the records as they are.
     progress : bool or None
         A progress bar on stderr, one step per screening round and trial fit (None: only on a terminal).
+    candidates : sequence of Effect
+        Effects the user brings (:func:`~cosim.diagnose.user_candidates.candidate`), searched, scored and
+        reported beside the catalogue's (their names must differ from the catalogue's).
 
     Returns
     -------
@@ -277,10 +281,23 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     """
     # the work is tall, thin least squares and small matrix products: threaded BLAS only adds overhead
     # (3x slower on 2 cores)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
+    extra = [c for c in candidates if c.name not in EFFECTS]
+    for c in candidates:
+        if not isinstance(c, Effect) or (c.name in EFFECTS and c not in extra and EFFECTS[c.name] is not c):
+            raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
+                                      "build it with cosim.diagnose.candidate(...)")
+    if extra:
+        effects = [*effect_names(effects), *(c.name for c in extra)]
+    try:
+        for c in extra:  # (the search looks effects up by name: the user's are there for this call only)
+            EFFECTS[c.name] = c
+        with threadpool_limits(limits=1, user_api="blas"):
+            return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
                          min_size=min_size, reference=reference, x0=x0, noise=noise, held_out=held_out,
-                         decimate=decimate, progress=progress)
+                             decimate=decimate, progress=progress)
+    finally:
+        for c in extra:
+            EFFECTS.pop(c.name, None)
 
 
 def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *, effects: str | Sequence[str],
