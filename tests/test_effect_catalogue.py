@@ -197,7 +197,8 @@ def test_a_fixed_period_is_judged_on_the_motion_not_on_the_positions_noise():
 #: Each effect's main physical parameter, by the name its parameters give it (rows: "va", "vb").
 MAIN = {"coulomb_friction": "Fc", "viscous_asymmetry": "viscous_asymmetry", "stribeck": "Fs",
         "backlash": "half_width", "deadzone": "gain_ratio", "saturation": "gain_ratio", "cogging": "amplitude_va",
-        "gravity": "amplitude_va", "offset": "offset_va", "delay": "delay_samples", "cubic_stiffness": "k3"}
+        "gravity": "amplitude_va", "offset": "offset_va", "delay": "delay_samples", "cubic_stiffness": "k3",
+        "sqrt_outflow": "a", "hard_stop": "stiffness"}
 
 
 def test_every_effect_names_its_main_parameter():
@@ -212,7 +213,7 @@ def test_every_effects_main_parameter_has_a_standard_error(name):
                                            [0, 0, 0, 1.0, 0], [0, 50.0, -50.0, -1.0, 0]]))
     roles = Roles.of(model)
     effect = EFFECTS[name]
-    place = next(a for a in effect.attachments(roles) if "va" in a.rows or a.rows)
+    place = next((a for a in effect.attachments(roles) if "va" in a.rows or a.rows), Attachment("va", ("va",), ()))
     place = Attachment(place.label, place.signals, ("va",))
     q = len(effect.terms(place, 3.0 if effect.nuisance else None))
     if name == "delay":

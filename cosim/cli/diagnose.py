@@ -30,6 +30,9 @@ DIAGNOSE_MIN_SAMPLES = 200
               help="The model to diagnose (cosim model JSON); default: identify a linear SINDYc model first.")
 @click.option("--effects", default="all", show_default=True, metavar="all|NAME,...",
               help="Which catalogued effects to try.")
+@click.option("--candidate", "user_candidates", multiple=True, metavar="'NAME: EXPR'",
+              help="An effect of your own, searched beside the catalogue's: an expression of the states and inputs, "
+                   "linear in named parameters, e.g. 'orifice: -a*sqrt(abs(h1))' (repeatable).")
 @click.option("--kinematics", default="auto", show_default=True, metavar="auto|none|POS=VEL,...",
               help="Rows d(POS)/dt = VEL pinned in the identified model: found from the names and the data "
                    "(auto), none, or given, e.g. theta_m=omega_m,theta_L=omega_L. Effects on velocities need them.")
@@ -54,6 +57,7 @@ DIAGNOSE_MIN_SAMPLES = 200
               help='Print {"effects": [{"name", "attached_to", "parameters"}...], "before": {...}, "after": {...}}.')
 @_friendly
 def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, model_path: str | None, effects: str,
+                     user_candidates: tuple[str, ...],
                      kinematics: str, derive: str | None, derive_window: int | None, time_column: str | None,
                      resample: bool, max_effects: int, initial_state: str, noise: str | None, decimate: str,
                      report_path: str | None,
@@ -69,9 +73,11 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
       cosim diagnose data.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --kinematics theta_m=omega_m
       cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --json
       cosim diagnose run1.csv run2.csv --state x,v --input u
+      cosim diagnose tanks.csv --state h1,h2 --input q --candidate "orifice: -a*sqrt(abs(h1))"
     """
     from ..diagnose.diagnosis import BASE_SETTINGS, diagnose
     from ..diagnose.effects import effect_selection
+    from ..diagnose.user_candidates import candidate
     from ..identify.model import IdentifiedModel
     from ..identify.sindyc import SINDYc
     from .identify import format_kinematics
@@ -81,6 +87,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                   {"--report": (".html", ".htm"), "-o/--output": (".json",)})  # before anything runs
     state_names, input_specs = _names(states, "--state"), _names(inputs, "--input")
     input_names = [spec.partition("=")[0].strip() for spec in input_specs]
+    extra = [candidate(text, signals=[*state_names, *input_names]) for text in user_candidates]  # before any run
     derived = derive_option(derive)
     known = _kinematics_option(kinematics, state_names)
     records = read_records(data_paths, states=state_names, inputs=input_specs, derive=derived, time=time_column,
@@ -103,7 +110,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     levels = {name: parse_number(text, what=f"--noise {name}")
               for name, text in _pairs(tuple(_split(noise)), "--noise").items()} if noise else None
     report = diagnose(model, records if len(records) > 1 else records[0], effects=selection,
-                      max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor)
+                      max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor, candidates=extra)
     payload = report.to_dict()
     if report_path:
         payload["report"] = str(report.write_report(
@@ -123,6 +130,8 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
         lines.append(f"  rejected: {c.name} on {c.attached_to}: held-out NRMSE "
                      f"{c.explained.get('held_out_nrmse_without_pct', float('nan')):.4g} % without, "
                      f"{c.explained.get('held_out_nrmse_with_pct', float('nan')):.4g} % with it")
+    for a in report.ambiguous:
+        lines.append(f"  {a.sentence}; {a.to_separate}")
     if report.dropped_terms:
         lines.append("  terms no longer needed: " + ", ".join(report.dropped_terms))
     rate = report.analysis

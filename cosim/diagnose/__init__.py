@@ -9,22 +9,26 @@
   physical parameters;
 * :mod:`~cosim.diagnose.diagnosis` - :func:`diagnose`: screen, fit, judge, add, repeat (one screening round in
   ``_ranking``, the trial fits in ``_trials``);
-* :mod:`~cosim.diagnose.diagnosis_report` - the :class:`DiagnosisReport`.
+* :mod:`~cosim.diagnose.diagnosis_report` - the :class:`DiagnosisReport`;
+* :mod:`~cosim.diagnose.user_candidates` - :func:`candidate`: an effect a user brings, an expression of the
+  signals with named parameters (``"orifice: -a*sqrt(abs(h1))"``) or a Python callable.
 
 Imports the identify room and below (not export).
 """
 
 from __future__ import annotations
 
+from . import effects_flow  # noqa: F401  (registers sqrt_outflow and hard_stop with the catalogue)
 from .candidates import EffectCandidate
 from .diagnosis import diagnose
 from .diagnosis_report import DiagnosisReport
 from .effects import EFFECTS, Attachment, Effect, Roles, register_effect
 from .residuals import RESIDUAL_KINDS, ResidualAnalysis, ResidualTests, correlation_tests, residuals
 from .screening import Nuisance, OutputErrorScreen, output_error_fit
+from .user_candidates import candidate
 
 __all__ = [
     "Attachment", "DiagnosisReport", "EFFECTS", "Effect", "EffectCandidate", "Nuisance", "OutputErrorScreen",
-    "RESIDUAL_KINDS", "ResidualAnalysis", "ResidualTests", "Roles", "correlation_tests", "diagnose",
+    "RESIDUAL_KINDS", "ResidualAnalysis", "ResidualTests", "Roles", "candidate", "correlation_tests", "diagnose",
     "output_error_fit", "register_effect", "residuals",
 ]

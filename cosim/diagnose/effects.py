@@ -22,9 +22,9 @@ Every effect is registered by name (:data:`EFFECTS`, :func:`register_effect`) wi
   saturation is what the plant sees of its input, through the input's own gain: its term's coefficient is
   tied to ``-b`` (:attr:`Effect.input_tie`; ``gain_ratio`` reports 1), so only its level is estimated.
 
-The catalogue: ``coulomb_friction``, ``viscous_asymmetry``, ``stribeck``, ``backlash``, ``deadzone``,
-``saturation``, ``cogging``, ``gravity``, ``offset``, ``delay``, ``cubic_stiffness`` (on one position, a
-Duffing spring to ground ``x**3``, or between two, ``(a-b)**3``).
+The catalogue: ``coulomb_friction``, ``viscous_asymmetry``, ``stribeck``, ``backlash``, ``deadzone``, ``saturation``,
+``cogging``, ``gravity``, ``offset``, ``delay``, ``cubic_stiffness`` (on one position, a Duffing spring to ground
+``x**3``, or between two, ``(a-b)**3``); :mod:`.effects_flow`'s ``sqrt_outflow`` and ``hard_stop`` (``overflow``).
 
 Examples
 --------
@@ -49,7 +49,7 @@ from ..identify.model import IdentifiedModel
 from . import _record_band as rb
 from ._record_band import RecordBand
 
-__all__ = ["EFFECTS", "Attachment", "Effect", "EffectSelection", "RecordBand", "Roles", "effect_selection",
+__all__ = ["ALIASES", "EFFECTS", "Attachment", "Effect", "EffectSelection", "RecordBand", "Roles", "effect_selection",
            "register_effect"]
 
 
@@ -335,6 +335,8 @@ def delayed_source(name: str) -> str | None:
 
 
 EFFECTS: dict[str, Effect] = {}
+#: Other names of catalogued effects in a selection (:func:`effect_selection`).
+ALIASES: dict[str, str] = {"overflow": "hard_stop"}
 
 
 def register_effect(effect: Effect) -> Effect:
@@ -369,7 +371,8 @@ class EffectSelection:
 def effect_selection(selection: str | Sequence[str] | EffectSelection = "all") -> EffectSelection:
     """Parse a selection: ``"all"``, comma-separated names, or a list of them; an item ``name:nuisance=value``
     (``"cogging:periods=120"``) tries that effect at that nuisance value only. ``"all"`` may be combined with
-    fixed items (``"all,cogging:periods=120"``). Unknown names and bad values are refused in one line.
+    fixed items (``"all,cogging:periods=120"``). Unknown names and bad values are refused in one line. A name of
+    :data:`ALIASES` selects its effect (``"overflow"``: ``hard_stop``).
 
     Examples
     --------
@@ -379,8 +382,7 @@ def effect_selection(selection: str | Sequence[str] | EffectSelection = "all") -
     """
     if isinstance(selection, EffectSelection):
         return selection
-    items = [s.strip() for s in selection.split(",")] if isinstance(selection, str) else [str(s).strip()
-                                                                                          for s in selection]
+    items = [str(s).strip() for s in (selection.split(",") if isinstance(selection, str) else selection)]
     items = [s for s in items if s]
     names: list[str] = []
     fixed: dict[str, float] = {}
@@ -389,7 +391,7 @@ def effect_selection(selection: str | Sequence[str] | EffectSelection = "all") -
             names += [n for n in EFFECTS if n not in names]
             continue
         name, _, setting = item.partition(":")
-        name = name.strip()
+        name = ALIASES.get(name.strip(), name.strip())
         if name not in EFFECTS:
             raise UnknownVariableError(f"no effect named {name!r} in the catalogue; known: {', '.join(EFFECTS)}")
         if setting:
@@ -553,8 +555,7 @@ register_effect(Effect(
     "coulomb_friction", "Coulomb friction: a force of constant size opposing the motion (smooth near zero speed)",
     "velocity", "smoothing_velocity", "velocity",
     lambda a, v: (f"tanh({a.signals[0]}/{_num(v)})",), _friction_params("Fc"),
-    grid_fractions=(3e-4, 1e-3, 3e-3, 1e-2, 3e-2), plausible=lambda p: not p["Fc"] <= 0.0,
-    span=rb.smoothing_span))
+    grid_fractions=(3e-4, 1e-3, 3e-3, 1e-2, 3e-2), plausible=lambda p: not p["Fc"] <= 0.0, span=rb.smoothing_span))
 register_effect(Effect(
     "viscous_asymmetry", "viscous friction that differs between positive and negative speed (|v| term)",
     "velocity", None, "", lambda a, v: (f"abs({a.signals[0]})",), _friction_params("viscous_asymmetry")))
@@ -566,8 +567,7 @@ register_effect(Effect(
     span=rb.stribeck_span, make_grid=rb.stribeck_grid, multistart=True, shown=rb.stribeck_shown))
 register_effect(Effect(
     "backlash", "backlash: a dead band in the coupling between two positions (no force inside the gap)",
-    "pair", "half_width", "twist",
-    lambda a, v: (_clip(f"({a.signals[0]}-{a.signals[1]})", v),), _backlash_params,
+    "pair", "half_width", "twist", lambda a, v: (_clip(f"({a.signals[0]}-{a.signals[1]})", v),), _backlash_params,
     grid_fractions=(0.02, 0.05, 0.1, 0.2, 0.4)))
 register_effect(Effect(
     "deadzone", "dead zone on an input: small commands have no effect", "input", "width", "input",
@@ -586,11 +586,9 @@ register_effect(Effect(
     lambda a, v: (f"sin({a.signals[0]})", f"cos({a.signals[0]})"), _periodic_params("periods"),
     span=lambda p, band, _: (0.0, math.inf) if rb.gravity_usable(p, band) else None,
     absorbs=lambda a: (a.signals[0], "1")))
-register_effect(Effect(
-    "offset", "a constant force or torque (offset, unbalance, amplifier bias)", "none", None, "",
+register_effect(Effect("offset", "a constant force or torque (offset, unbalance, amplifier bias)", "none", None, "",
     lambda a, v: ("1",), _offset_params))
-register_effect(Effect(
-    "delay", "a time delay on an input (transport, computation)", "input", "delay", "samples",
+register_effect(Effect("delay", "a time delay on an input (transport, computation)", "input", "delay", "samples",
     lambda a, v: (delayed_name(a.signals[0], int(round(v))),), _delay_params,
     make_fit_terms=lambda a, v: tuple(delayed_name(a.signals[0], int(round(v)) + k) for k in (0, 1)),
     integer=True, plausible=lambda p: 0.0 < p["delay_samples"] < rb.DELAY_MAX,
