@@ -50,7 +50,9 @@ Records
     (then ``--derive POS``);
     excitation multisine, PRBS, steps, or closed loop (a PID on the position, sampled at the record rate,
     tracking a reference). Record ``i`` is drawn from seed ``i``, fully reproducible; its held-out twin is
-    the same plant and effects with another excitation (and noise) seed.
+    the same plant and effects with another excitation (and noise) seed. Records 200 on are the families of
+    ``independent_families.py`` (one-way pairs, saturation and dead zone, Stribeck, gravity, Duffing, two
+    tanks, fixed-step Euler), each with its effects' visibility measured from noise-free runs.
 
 Integration: every sample interval separately (the input is held, so the right-hand side is smooth inside it)
 with ``solve_ivp(method="LSODA")`` (stiff-switching: the friction's sharp tanh), ``max_step`` the interval.
@@ -536,13 +538,20 @@ def _draw_sizes(rng: np.random.Generator, max_samples: int) -> tuple[float, floa
     return 1.0 / rate, duration, n
 
 
-def make_record(index: int, *, max_samples: int = DEFAULT_MAX_SAMPLES, shown_only: bool = True,
+def make_record(index: int, *, max_samples: int | None = None, shown_only: bool = True,
                 noise_of_effect_free: bool = False) -> Record:
     """Record `index` (seed `index`): plant, effects calibrated to 2-20x the noise, training data and twin.
 
+    Records from 200 on are the families of :mod:`independent_families` (their own lengths, 5 k-50 k samples;
+    `max_samples` shortens them). `max_samples` None: :data:`DEFAULT_MAX_SAMPLES` below 200.
     ``shown_only=False`` keeps an effect the record cannot show as itself (the first version's records);
     ``noise_of_effect_free=True`` sizes the noise on the run without effects (the second version's records:
     an effect that shrinks the motion, a saturation, left noise of up to 17 times the written signal's range)."""
+    if index >= 200:
+        import independent_families
+
+        return independent_families.make_family_record(index, max_samples=max_samples)
+    max_samples = DEFAULT_MAX_SAMPLES if max_samples is None else max_samples
     rng = np.random.default_rng([index, 0])
     dt, duration, n = _draw_sizes(rng, max_samples)
     rate = 1.0 / dt
@@ -716,14 +725,15 @@ if __name__ == "__main__":
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("indices", nargs="+", type=int)
-    parser.add_argument("--max-samples", type=int, default=DEFAULT_MAX_SAMPLES)
+    parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--out", default="/tmp/independent_plants")
     args = parser.parse_args()
     for i in args.indices:
         start = time.perf_counter()
         rec = make_record(i, max_samples=args.max_samples)
         folder = rec.write(Path(args.out) / f"record_{i:04d}")
-        eff = ", ".join(f"{e['name']}@{e['at']} {e['main']}={e['main_value']:.4g} (x{e['ratio']:.1f})"
+        eff = ", ".join(f"{e['name']}@{e['at']} {e['main']}={e['main_value']:.4g} "
+                        f"(x{e['ratio'] if e['ratio'] is not None else e['visibility']:.1f})"
                         for e in rec.spec["effects"]) or "none"
         print(f"{i}: {rec.spec['plant']['kind']} {rec.spec['excitation']} {rec.spec['samples']} samples "
               f"{rec.spec['rate_hz']:.0f} Hz, noise {100 * rec.spec['noise_frac']:.2f} %, "
