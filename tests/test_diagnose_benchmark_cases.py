@@ -164,6 +164,21 @@ def test_a_delay_the_base_took_up_elsewhere_is_named(tmp_path):
     assert payload["after"]["nrmse_pct"] * 3 < payload["before"]["nrmse_pct"]
 
 
+def test_only_an_untied_input_effect_gets_a_re_identified_start():
+    from cosim.diagnose._joint_start import has_joint_start
+    from cosim.diagnose.effects import EFFECTS
+
+    assert [name for name in sorted(EFFECTS) if has_joint_start(name)] == ["delay"]  # not saturation, dead zone
+
+
+def test_an_effect_on_states_gets_an_equation_error_start():
+    from cosim.diagnose._joint_start import has_state_start
+    from cosim.diagnose.effects import EFFECTS
+
+    assert [name for name in sorted(EFFECTS) if has_state_start(name)] == [
+        "backlash", "cogging", "coulomb_friction", "cubic_stiffness", "gravity", "stribeck", "viscous_asymmetry"]
+
+
 @pytest.mark.slow
 def test_a_friction_the_linear_base_stood_in_for_is_named(tmp_path):
     # record 112: the two masses move as one body (a 5 Hz shaft under a slower multisine) with a Coulomb friction

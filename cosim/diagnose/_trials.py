@@ -19,7 +19,7 @@ actual drop of the output error (``_evidence``: change of BIC, likelihood-ratio 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -279,6 +279,34 @@ def _remove_effect(current: IdentifiedModel, cand: EffectCandidate, own: int | N
     return reduced, rest
 
 
+def _drop_redundant(current: IdentifiedModel, accepted: list[EffectCandidate], owners: list[int],
+                    nuisances: list[Nuisance], columns: dict[str, np.ndarray], dt: float, alpha: float,
+                    bic_margin: float, min_size: float, fit: _FitOptions):
+    """Backward check: each earlier effect is removed and the model refitted; if the removal does not cost a
+    significant rise of the output error (the same test as for adding it), the effect goes."""
+    for j in range(len(accepted) - 2, -1, -1):
+        cand = accepted[j]
+        own = owners.index(j) if j in owners else None
+        removed = _remove_effect(current, cand, own, nuisances, columns, dt, fit)
+        if removed is None:
+            continue
+        reduced, rest = removed
+        cost_full = float(current.meta["refinement"]["cost"])
+        cost_reduced = float(reduced.meta["refinement"]["cost"])
+        if cost_reduced <= cost_full:
+            pays = False
+        else:
+            q = _parameters(cand, nuisances[own] if own is not None else None)
+            delta_bic, p_value, size, _ = _evidence(OutputErrorScreen(reduced, columns, dt, **fit.kw), current,
+                                                    columns, dt, cost_reduced, cost_full, q, fit)
+            pays = p_value < alpha and delta_bic < -bic_margin and size >= min_size
+        if not pays:
+            current, nuisances = reduced, rest
+            accepted = accepted[:j] + accepted[j + 1:]
+            owners = [k - (k > j) for k in owners if k != j]
+    return current, accepted, owners, nuisances
+
+
 def _retest_base(current: IdentifiedModel, base: IdentifiedModel, columns: dict[str, np.ndarray], dt: float,
                  nuisances: list[Nuisance], fit: _FitOptions) -> tuple[IdentifiedModel, list[Nuisance], list[str]]:
     """Re-test the base model's terms once an effect is in: a term that no longer stands clear of zero goes.
@@ -401,8 +429,99 @@ def _final_parameters(cand: EffectCandidate, model: IdentifiedModel) -> EffectCa
     return replace(cand, parameters=params, uncertainty=unc)
 
 
+def _base_offset(current: IdentifiedModel, columns: dict[str, np.ndarray], dt: float, nuisances: list[Nuisance],
+                 alpha: float, bic_margin: float, min_size: float, fit: _FitOptions,
+                 check: Any = None) -> tuple[EffectCandidate, IdentifiedModel, IdentifiedModel] | None:
+    """The base model's constant force, judged as an effect: an ``offset`` finding, the model with it and the
+    model without it (refitted), or None.
+
+    The base keeps a constant in its equations (without it a spring to ground stands in for an offset, and is
+    never removed), so the ``offset`` effect is never screened. Once the rounds are over, the constants left in
+    the dynamic rows are tested the way a candidate is, against the model without them: the likelihood-ratio
+    p-value, the BIC change, the size, and (with `check`, a :class:`~cosim.diagnose._holdout.HeldOutCheck`) the
+    held-out free-run error. With several rows, the offset is named in one row when the model with that row's
+    constant alone does as well by BIC (two constants of a free two-mass plant are so correlated that each
+    one's own standard error says nothing); the others are then removed from the model.
+    """
+    if "1" not in current.terms:
+        return None
+    k = current.terms.index("1")
+    dynamic = [current.states.index(r) for r in Roles.of(current).dynamic_rows]
+    rows = [i for i in dynamic if current.coef[i, k] != 0.0]
+    if not rows:
+        return None
+    refit = _refit_without(current, [(i, k) for i in rows], columns, dt, nuisances, fit)
+    if refit is None:
+        return None
+    reduced = refit[0]
+    screen = OutputErrorScreen(reduced, columns, dt, **fit.kw)
+
+    def without(model: IdentifiedModel, dropped: list[int]) -> float:
+        # the cost without the constants of `dropped`: the refit's, or the Wald (linearised) one if lower. A
+        # refit from the model with a constant zeroed can stall far from its optimum on a drifting free run,
+        # and a stalled refit would make any constant look necessary.
+        return min(_cost_of(reduced), _cost_of(model) + _wald_cost(model, [(i, "1") for i in dropped], screen.n_obs))
+
+    cost_full = _cost_of(current)
+    cost_reduced = without(current, rows)
+    if not cost_reduced > cost_full:
+        return None
+    evidence = _evidence(screen, current, columns, dt, cost_reduced, cost_full, len(rows), fit)
+    if len(rows) > 1:  # one row's constant alone, the one whose model costs least, if that does as well
+        n_eff = screen.n_obs / evidence[3]
+        keep = min(rows, key=lambda i: _wald_cost(current, [(j, "1") for j in rows if j != i], screen.n_obs))
+        others = [j for j in rows if j != keep]
+        if n_eff * math.log(1.0 + _wald_cost(current, [(j, "1") for j in others], screen.n_obs) / cost_full) < \
+                len(others) * math.log(n_eff):
+            refit = _refit_without(current, [(j, k) for j in others], columns, dt, nuisances, fit)
+            single = refit[0] if refit is not None else None
+            # kept only if its refit bears the linearised promise out (a stalled refit would not)
+            if single is not None and n_eff * math.log(_cost_of(single) / cost_full) < len(others) * math.log(n_eff):
+                current, rows = single, [keep]
+                cost_reduced = without(current, rows)
+                if not cost_reduced > _cost_of(current):
+                    return None
+                evidence = _evidence(screen, current, columns, dt, cost_reduced, _cost_of(current), 1, fit)
+    delta_bic, p_value, size, factor = evidence
+    if not (p_value < alpha and delta_bic < -bic_margin and size >= min_size):
+        return None
+    explained = {"size": size, "plausible": True, "correlation_factor": factor}
+    if check is not None:
+        held = check.judge(reduced, current, columns)
+        explained.update(held.as_explained())
+        if not held.passed:
+            return None
+    cand = EffectCandidate("offset", "constant", tuple(current.states[i] for i in rows), None, ("1",), delta_bic,
+                           p_value, explained, True, meaning=EFFECTS["offset"].meaning)
+    return _final_parameters(cand, current), current, reduced
+
+
 def _cost_of(model: IdentifiedModel) -> float:
     return float(model.meta["refinement"]["cost"])
+
+
+def _wald_cost(model: IdentifiedModel, entries: list[tuple[int, str]], n_obs: int) -> float:
+    """How much an output-error fit's cost rises when the coefficients at `entries` (row, term) are held at zero
+    and the others follow, to first order: the Wald statistic from the fit's covariance, in cost units
+    (infinite when the covariance does not cover them). `n_obs`: the residuals the fit counted."""
+    if not entries:
+        return 0.0
+    ref = model.meta["refinement"]
+    order = {(int(i), str(t)): j for j, (i, t) in enumerate(ref["parameters"])}
+    if not all(e in order for e in entries):
+        return math.inf
+    idx = [order[e] for e in entries]
+    cov = np.asarray(ref["covariance"], dtype=float)[np.ix_(idx, idx)]
+    c = np.array([model.coef[i, model.terms.index(t)] for i, t in entries])
+    try:
+        wald = float(c @ np.linalg.solve(cov, c))
+    except np.linalg.LinAlgError:
+        return math.inf
+    if not (math.isfinite(wald) and wald >= 0.0):  # a covariance that is no covariance: nothing to learn from it
+        return math.inf
+    # the covariance is the inverse Gauss-Newton Hessian times the residual variance, cost / (n - p)
+    variance = float(ref["cost"]) / max(n_obs - len(order), 1)
+    return wald * variance
 
 
 def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], columns: dict[str, np.ndarray],
@@ -425,9 +544,3 @@ def _refit_without(model: IdentifiedModel, entries: list[tuple[int, int]], colum
     except (DataError, np.linalg.LinAlgError, FloatingPointError):
         return None
     return refitted, nuis
-
-
-def _write_back(accepted: list[EffectCandidate], owners: Sequence[int], nuisances: Sequence[Nuisance]) -> None:
-    """Put the fitted nuisance values (and the terms written with them) on the accepted effects."""
-    for j, nu in zip(owners, nuisances, strict=True):
-        accepted[j] = replace(accepted[j], nuisance=nu.value, terms=nu.terms, nuisance_se=nu.std_error)

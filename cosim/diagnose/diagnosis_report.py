@@ -89,11 +89,6 @@ class DiagnosisReport:
     rejected: tuple[EffectCandidate, ...] = ()
     dropped_terms: tuple[str, ...] = ()
     analysis: dict[str, Any] = field(default_factory=dict)
-    #: Readings these data cannot tell apart (:class:`~cosim.diagnose.ambiguity.Ambiguity`), with the
-    #: experiment that would separate them.
-    ambiguous: tuple = ()
-    #: Per pass of the search: its candidates, samples counted, the selection's probabilities, the bound.
-    stability: tuple = ()
 
     @property
     def found(self) -> bool:
@@ -101,10 +96,7 @@ class DiagnosisReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form: ``effects`` (accepted, in the order found; empty when none), ``before``/``after`` with
-        ``nrmse_pct`` and ``r2``, ``rejected`` (candidates that failed on held-out data), ``dropped_terms``,
-        ``ambiguous`` (readings the data cannot tell apart: ``effects``, ``to_separate``...), ``to_separate``
-        (their sentences) and
-        ``stability`` (the selection's probabilities per pass)."""
+        ``nrmse_pct`` and ``r2``, ``rejected`` (candidates that failed on held-out data) and ``dropped_terms``."""
         return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
                 "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
                 "trials": [[{"name": c.name, "attached_to": c.attached_to, "delta_bic": c.delta_bic,
@@ -112,9 +104,6 @@ class DiagnosisReport:
                            for round_ in self.trials],
                 "rejected": [e.to_dict() for e in self.rejected], "dropped_terms": list(self.dropped_terms),
                 "analysis": dict(self.analysis),
-                "ambiguous": [a.to_dict() for a in self.ambiguous],
-                "to_separate": [a.to_separate for a in self.ambiguous],
-                "stability": [dict(s) for s in self.stability],
                 "equations_after": self.model_after.equations()}
 
     def plot_evidence(self, path: str | os.PathLike | None = None, *, bins: int = 30) -> matplotlib.figure.Figure:
