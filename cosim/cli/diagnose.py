@@ -130,8 +130,6 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
         lines.append(f"  rejected: {c.name} on {c.attached_to}: held-out NRMSE "
                      f"{c.explained.get('held_out_nrmse_without_pct', float('nan')):.4g} % without, "
                      f"{c.explained.get('held_out_nrmse_with_pct', float('nan')):.4g} % with it")
-    for a in report.ambiguous:
-        lines.append(f"  {a.sentence}; {a.to_separate}")
     if report.dropped_terms:
         lines.append("  terms no longer needed: " + ", ".join(report.dropped_terms))
     rate = report.analysis

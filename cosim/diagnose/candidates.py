@@ -10,12 +10,15 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from .effects import Attachment, Effect, Roles
+from ..errors import InvalidSettingError
+from .effects import EFFECTS, Attachment, Effect, Roles, effect_names
 
 __all__ = ["EffectCandidate"]
 
@@ -119,3 +122,24 @@ def _uncertainty(effect: Effect, coef: dict, cov: np.ndarray, value: float | Non
         if var > 0.0:
             out[name] = math.sqrt(var)
     return out
+
+
+@contextmanager
+def registered(candidates: Sequence[Effect], effects: Any) -> Iterator[Any]:
+    """The effects a user brings (`candidates`, :func:`~cosim.diagnose.user_candidates.candidate`) in the catalogue
+    for the duration of one diagnosis (the search looks effects up by name), and the selection `effects` with
+    their names added."""
+    extra = [c for c in candidates if c.name not in EFFECTS]
+    for c in candidates:
+        if not isinstance(c, Effect) or (c not in extra and EFFECTS[c.name] is not c):
+            raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
+                                      "build it with cosim.diagnose.candidate(...)")
+    if extra:
+        effects = [*effect_names(effects), *(c.name for c in extra)]
+    try:
+        for c in extra:
+            EFFECTS[c.name] = c
+        yield effects
+    finally:
+        for c in extra:
+            EFFECTS.pop(c.name, None)

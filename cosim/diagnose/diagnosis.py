@@ -91,7 +91,7 @@ from ._trials import (
     _retest_base,
     _sigma,
 )
-from .candidates import EffectCandidate
+from .candidates import EffectCandidate, registered
 from .diagnosis_report import DiagnosisReport, _figures, _message
 from .effects import EFFECTS, Effect, effect_names
 from .residuals import ResidualAnalysis, residuals
@@ -281,23 +281,10 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     """
     # the work is tall, thin least squares and small matrix products: threaded BLAS only adds overhead
     # (3x slower on 2 cores)
-    extra = [c for c in candidates if c.name not in EFFECTS]
-    for c in candidates:
-        if not isinstance(c, Effect) or (c.name in EFFECTS and c not in extra and EFFECTS[c.name] is not c):
-            raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
-                                      "build it with cosim.diagnose.candidate(...)")
-    if extra:
-        effects = [*effect_names(effects), *(c.name for c in extra)]
-    try:
-        for c in extra:  # (the search looks effects up by name: the user's are there for this call only)
-            EFFECTS[c.name] = c
-        with threadpool_limits(limits=1, user_api="blas"):
-            return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
+    with registered(candidates, effects) as effects, threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
                          min_size=min_size, reference=reference, x0=x0, noise=noise, held_out=held_out,
-                             decimate=decimate, progress=progress)
-    finally:
-        for c in extra:
-            EFFECTS.pop(c.name, None)
+                         decimate=decimate, progress=progress)
 
 
 def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *, effects: str | Sequence[str],
