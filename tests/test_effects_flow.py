@@ -23,6 +23,10 @@ SERVO = IdentifiedModel(states=("x", "v"), inputs=("u",), terms=("v", "x", "u"),
                         coef=np.array([[1.0, 0.0, 0.0], [-1.0, -100.0, 2.0]]))
 
 
+#: Measured with the joint search of branch issue-39-joint-search (both outflows: a 0.59994 and 0.62497; the
+#: overflow's bound 2.0137); the search on main names neither.
+JOINT_SEARCH_ONLY = "issue 39: passes with the joint search (branch issue-39-joint-search), not with main's"
+
 def test_levels_are_the_dynamic_states_that_are_not_velocities():
     assert level_states(Roles.of(TANKS)) == ("h1", "h2")
     assert level_states(Roles.of(SERVO)) == ()  # x is a position, v a velocity: no outflow tried there
@@ -96,7 +100,7 @@ def test_hard_stop_gives_the_tanks_top_and_weir_when_refitted_by_hand():
 
 
 # ---------------------------------------------------------------------------------------------- the search
-@pytest.mark.xfail(strict=False, reason="issue 39: passes with the joint search of branch issue-39-joint-search (measured there: both outflows, a 0.59994 and 0.62497; the overflow's bound 2.0137), not with the search on main")
+@pytest.mark.xfail(strict=False, reason=JOINT_SEARCH_ONLY)
 def test_the_search_names_both_outflows_when_given_the_outflow_alone():
     data = two_tanks()
     report = diagnose(linear_base(data), data, effects="sqrt_outflow")
@@ -115,7 +119,7 @@ def test_the_default_search_names_the_outflow_on_a_two_tank_record():
     assert report.effects and report.effects[0].name == "sqrt_outflow", report.message
 
 
-@pytest.mark.xfail(strict=False, reason="issue 39: passes with the joint search of branch issue-39-joint-search (measured there: both outflows, a 0.59994 and 0.62497; the overflow's bound 2.0137), not with the search on main")
+@pytest.mark.xfail(strict=False, reason=JOINT_SEARCH_ONLY)
 def test_the_default_search_names_the_overflow_where_the_level_hits_the_top():
     data = two_tanks(top=2.0, seed=1, kw=50.0)
     report = diagnose(linear_base(data), data)
