@@ -90,6 +90,9 @@ class RecordBand:
     ranges: Mapping[str, float] = field(default_factory=dict)
     visible: Mapping[str, float] = field(default_factory=dict)
     measured_ranges: Mapping[str, float] = field(default_factory=dict)
+    #: Per measured signal, the share of its samples that sit at its lowest and at its highest value (within
+    #: two noise levels or 1 % of its range): a state held at a bound lingers there.
+    lingers: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, columns: Mapping[str, np.ndarray], dt: float | None = None,
@@ -105,8 +108,14 @@ class RecordBand:
         levels = dict(noise or {})
         spans = {k: max(float(np.ptp(v)) - 4.0 * levels.get(k, 0.0), 0.0)
                  for k, v in (measured or {}).items() if np.size(v)}
+        lingers = {}
+        for k, v in (measured or {}).items():
+            v = np.asarray(v, dtype=float)
+            if v.size and np.ptp(v) > 0:
+                near = max(2.0 * levels.get(k, 0.0), 0.01 * float(np.ptp(v)))
+                lingers[k] = (float(np.mean(v <= v.min() + near)), float(np.mean(v >= v.max() - near)))
         return cls(dt=float(dt) if dt else None, samples=int(samples), noise=levels, ranges=ranges,
-                   visible=visible, measured_ranges=spans)
+                   visible=visible, measured_ranges=spans, lingers=lingers)
 
     @property
     def duration(self) -> float | None:

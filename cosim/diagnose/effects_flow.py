@@ -128,12 +128,19 @@ def _stop_terms(attachment: Attachment, value: float | None) -> tuple[str, ...]:
     return (f"0.5*({past})+0.5*abs({past})",)
 
 
+#: The least share of the samples a measured state must spend at its extreme for a hard stop to be tried there
+#: (a level held at the tank's top, an axis against its stop); a state that only turns there is not held.
+LINGER = 0.03
+
+
 def _stop_span(x: np.ndarray, band: RecordBand, label: str) -> tuple[float, float] | None:
     """The bound's size between the free run's median and its BOUND_QUANTILE quantile on the label's side, where
     its sign is the label's; None where the state does not move or the range holds no bound of that sign."""
-    _, side, below = _place(label)
+    state, side, below = _place(label)
     if x.size < 2 or not np.ptp(x) > 0:
         return None
+    if state in band.lingers and band.lingers[state][side == "upper"] < LINGER:
+        return None  # the measured state never sits at that end: nothing holds it there
     q = BOUND_QUANTILE if side == "upper" else 1.0 - BOUND_QUANTILE
     lo, hi = sorted((float(np.median(x)), float(np.quantile(x, q))))
     if below:
