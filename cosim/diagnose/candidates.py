@@ -129,11 +129,11 @@ def registered(candidates: Sequence[Effect], effects: Any) -> Iterator[Any]:
     """The effects a user brings (`candidates`, :func:`~cosim.diagnose.user_candidates.candidate`) in the catalogue
     for the duration of one diagnosis (the search looks effects up by name), and the selection `effects` with
     their names added."""
-    extra = [c for c in candidates if c.name not in EFFECTS]
-    for c in candidates:
-        if not isinstance(c, Effect) or (c not in extra and EFFECTS[c.name] is not c):
+    for c in candidates:  # an Effect of its own name (given twice, or already registered, is the same one)
+        if not isinstance(c, Effect) or EFFECTS.get(c.name, c) is not c:
             raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
                                       "build it with cosim.diagnose.candidate(...)")
+    extra = list({c.name: c for c in candidates if c.name not in EFFECTS}.values())
     if extra:
         effects = [*effect_names(effects), *(c.name for c in extra)]
     try:
