@@ -1,15 +1,20 @@
-"""The main job, `cosim demo`, end to end: the diagnosis finds the undeclared friction with its size, the controllers
-designed on the diagnosed model (with the friction compensated) meet the telescope specs on the FMU with friction,
-the diagnosed model predicts the real loop better than the linear one, and the one report holds it all."""
+"""The main job, `cosim demo`, end to end: its linear model is the one `cosim identify` gives with no options, the
+diagnosis finds the undeclared friction with its size, the controllers designed on the diagnosed model (with the
+friction compensated) meet the telescope specs on the FMU with friction, the diagnosed model predicts the real loop
+better than the linear one, and the one report holds it all."""
 
 import html
+import json
 import re
 
+import numpy as np
 import pytest
+from click.testing import CliRunner
 from summary_checks import summary_rows
 
 from controllers.base import load_controller
 from controllers.compensation import EffectCompensation
+from cosim.cli import main
 from cosim.demo import run_demo, summary_lines
 from cosim.report import value_with_error
 from cosim.study.paper import STATES
@@ -22,6 +27,19 @@ TIMING = "deadline_miss_rate"
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     return run_demo(tmp_path_factory.mktemp("demo"), friction=FRICTION)
+
+
+@pytest.mark.slow
+def test_the_linear_model_is_the_one_cosim_identify_gives_with_no_options(demo, tmp_path):
+    """The demo identifies with `cosim identify`'s defaults: the command, given the demo's data file and no
+    options, writes the same model (the two cannot drift apart)."""
+    out = tmp_path / "identified.json"
+    result = CliRunner().invoke(main, ["identify", demo["data"], "--state", ",".join(STATES), "--input", "Tm",
+                                       "-o", str(out)], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    ours, theirs = (json.loads(open(path, encoding="utf-8").read()) for path in (demo["model"], out))
+    assert theirs["terms"] == ours["terms"] and "1" in ours["terms"]  # identify's library has the constant
+    np.testing.assert_allclose(theirs["coef"], ours["coef"], rtol=1e-9, atol=0.0)
 
 
 @pytest.mark.slow

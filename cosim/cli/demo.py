@@ -19,8 +19,9 @@ __all__ = ["demo"]
 @_friendly
 def demo(out_dir: str, progress: bool | None, as_json: bool) -> None:
     """Run the main job on the bundled servo FMU and write its results (data, models, controllers, plots, one
-    HTML report) to --out-dir: a linear model of friction-laden noisy data, the diagnosis of the friction it lacks,
-    PID and MPC designed on each model and validated on the FMU.
+    HTML report) to --out-dir: a linear model of friction-laden noisy data (identified as `cosim identify` does
+    given no options), the diagnosis of the friction it lacks, PID and MPC designed on each model and validated
+    on the FMU.
 
     \b
     Example:
