@@ -198,7 +198,7 @@ def test_example_script_refuses_a_missing_folder(tmp_path):
 #: machine picks) -> Coulomb 21.40 N, Stribeck, cogging 110 (test RMSE 26.7 mm: they fail); Sandybridge -> cogging,
 #: offset. The redesign that answers the same on every kernel is on branch issue-39-joint-search, not merged yet.
 KERNEL_DEPENDENT = ("issue 39: the default path's effects depend on the BLAS kernel (Haswell passes, SkylakeX "
-                    "and Sandybridge do not); the kernel-independent search is on branch issue-39-joint-search")
+                    "and Sandybridge do not; benchmarks/results/reproducibility.md)")
 
 
 #: The issue's default path, also the README tour's EMPS line (tests/test_readme_tour.py checks they agree).
