@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_diagnosis_generalization import RESULTS, commands, prepare  # noqa: E402
+from bench_diagnosis_generalization import RESULTS, _write, commands, prepare  # noqa: E402
 
 #: The EMPS record (``$COSIM_EMPS_DIR``, else ``../shared/data/emps`` beside the repository, as the tests read it).
 EMPS = Path(os.environ.get("COSIM_EMPS_DIR") or Path(__file__).resolve().parents[2] / "shared" / "data" / "emps") \
@@ -112,16 +112,11 @@ def run_case(argv: list[str], files: list[str], config: str, scratch: Path, time
 
 
 def _without_output(argv: list[str]) -> list[str]:
-    out, skip = [], False
-    for a in argv:
-        if skip:
-            skip = False
-            continue
-        if a == "-o":
-            skip = True
-            continue
-        out.append(a)
-    return out
+    """`argv` less its ``-o PATH`` (the runs only read the JSON on stdout)."""
+    if "-o" not in argv:
+        return argv
+    at = argv.index("-o")
+    return argv[:at] + argv[at + 2:]
 
 
 def _key(effects: list[dict[str, Any]]) -> tuple:
@@ -193,14 +188,6 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(result: dict[str, Any], out: Path) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    for suffix, text in ((".json", json.dumps(result, indent=1) + "\n"), (".md", markdown(result))):
-        tmp = out.with_suffix(suffix + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(out.with_suffix(suffix))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--slice", default="0:20", help="benchmark records 'A:B' or 'i,j,k' ('' for none)")
@@ -220,17 +207,17 @@ def main() -> None:
     data = Path(args.data) if args.data else Path(os.environ.get("TMPDIR", "/tmp")) / "cosim-diagnosis-records"
     configs = [c.strip() for c in args.configs.split(",") if c.strip()]
     scratch = data / "perturbed"
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).parent).stdout.strip()
     rows = []
     for label, argv, files in cases(indices, data, args.max_samples, args.cosim, not args.no_emps):
         runs = [run_case(argv, files, c, scratch, args.timeout) for c in configs]
         row = {"case": label, **compare(runs), "runs": runs}
         rows.append(row)
         print(f"{label}: {'same' if row['identical'] else 'DIFFERENT'} {row['answers']}", flush=True)
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).parent).stdout.strip()
         _write({"commit": commit, "machine": f"{platform.machine()}, {os.cpu_count()} cores",
                 "date": time.strftime("%Y-%m-%d"), "configs": configs, "records": args.slice or "none",
-                "max_samples": args.max_samples, "rows": rows}, Path(args.out))  # after every case: partial kept
+                "max_samples": args.max_samples, "rows": rows}, Path(args.out), markdown)  # partial kept
     print(markdown({"commit": "", "machine": "", "date": "", "configs": configs, "records": args.slice,
                     "max_samples": args.max_samples, "rows": rows}))
 

@@ -6,6 +6,7 @@ better than the linear one, and the one report holds it all."""
 import html
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,7 +38,7 @@ def test_the_linear_model_is_the_one_cosim_identify_gives_with_no_options(demo, 
     result = CliRunner().invoke(main, ["identify", demo["data"], "--state", ",".join(STATES), "--input", "Tm",
                                        "-o", str(out)], catch_exceptions=False)
     assert result.exit_code == 0, result.output
-    ours, theirs = (json.loads(open(path, encoding="utf-8").read()) for path in (demo["model"], out))
+    ours, theirs = (json.loads(Path(path).read_text(encoding="utf-8")) for path in (demo["model"], out))
     assert theirs["terms"] == ours["terms"] and "1" in ours["terms"]  # identify's library has the constant
     np.testing.assert_allclose(theirs["coef"], ours["coef"], rtol=1e-9, atol=0.0)
 
