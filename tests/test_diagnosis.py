@@ -120,7 +120,10 @@ def test_report_files(tmp_path):
     data, linear = coulomb_mass()  # quick, and the evidence plot must show the step at zero speed
     report = diagnose(linear, data)
     assert [e.name for e in report.effects] == ["coulomb_friction"]
-    assert report.effects[0].parameters["Fc"] == pytest.approx(1.0, rel=0.01)
+    # 1 % above the truth, not closer: the diagnosis decimates the record by 2 and holds the switch's smoothing
+    # velocity at the speed step the decimated record shows at a reversal (2.0 mm/s, the sharpest switch a free
+    # run of one step per sample resolves; issue 39), where the truth's is 1 mm/s
+    assert report.effects[0].parameters["Fc"] == pytest.approx(1.0, rel=0.02)
     html = report.write_report(tmp_path / "diagnosis.html")
     text = html.read_text()
     assert "coulomb_friction" in text and text.count("data:image/png;base64") >= 3

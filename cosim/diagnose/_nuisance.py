@@ -34,6 +34,16 @@ class Nuisance:
     #: row's coefficient of `term`, so it adds no free coefficient. An input's saturation or dead zone as the
     #: plant sees it: ``b * clip(u) = b * u - b * (u - clip(u))``, the input's own gain, tied (factor -1).
     tied_to: tuple[str, float] | None = None
+    #: The range the fit keeps the value in: what the record can show of it (the effect's span at its
+    #: attachment). A smoothing velocity's cost falls on towards zero (a sharper switch always fits a little
+    #: better): unbounded, where the fit stopped depended on the path, and the path on the last bits of the data.
+    bounds: tuple[float, float] = (0.0, math.inf)
+
+    def at_bound(self, direction: float) -> bool:
+        """Whether the value sits at the bound a step in `direction` (its sign) would cross."""
+        lo, hi = self.bounds
+        return (direction < 0.0 and self.value <= lo * (1.0 + 1e-12)) or \
+            (direction > 0.0 and self.value >= hi * (1.0 - 1e-12))
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -109,7 +119,8 @@ def _apply(model: IdentifiedModel, screen: OutputErrorScreen, step: np.ndarray,
     terms = list(model.terms)
     new_nuis = []
     for j, nu in enumerate(nuis):
-        value = nu.value * math.exp(float(np.clip(step[nb + n + j], -1.0, 1.0)))
+        lo, hi = nu.bounds
+        value = min(max(nu.value * math.exp(float(np.clip(step[nb + n + j], -1.0, 1.0))), lo), hi)
         for old, new in zip(nu.terms, nu.make_terms(value), strict=True):
             if old in terms:
                 terms[terms.index(old)] = new

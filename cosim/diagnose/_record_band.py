@@ -17,9 +17,13 @@ can be told from the data (None: the effect cannot be identified at that place) 
 * **Stribeck velocity** ``vs``: between :data:`STRIBECK_NOISE` noise levels of the velocity (and the speed step
   per sample at a reversal) and a third of the largest speed, keeping only values where at least
   :data:`MIN_SHARE` of the samples move slower than ``2 vs`` and as many faster;
-* **Coulomb smoothing velocity**: from a tenth of the speed step per sample at a reversal (a smaller one is a
-  sign function on the sample grid) to a few noise levels of the velocity, within ``[1e-4, 0.1]`` of the
-  largest speed;
+* **Coulomb smoothing velocity**: from the speed step per sample at a reversal to a few noise levels of the
+  velocity, within ``[1e-4, 0.1]`` of the largest speed. A smaller one is a sign function on the sample grid:
+  the free run then switches on the last bits of the speed near a reversal, and its cost is no smooth function
+  of the parameters (issue 39: with a tenth of the step, the fits on EMPS took the smoothing velocity to
+  1e-5-3e-3 m/s and named different effects under different BLAS kernels). The output-error fit keeps it in
+  this span (:attr:`~cosim.diagnose._nuisance.Nuisance.bounds`); where the data ask for a sharper switch it
+  rests at the lower end;
 * **delay**: whole samples from 1 to :data:`DELAY_SHARE` of the record (at most :data:`DELAY_MAX`), spaced by
   about 25 %.
 
@@ -258,7 +262,7 @@ def smoothing_span(velocity: np.ndarray, band: RecordBand, name: str) -> tuple[f
     if not vmax > 0.0:
         return None
     step = reversal_step(v)
-    lo = max(1e-4 * vmax, step / 10.0 if math.isfinite(step) else 0.0)
+    lo = max(1e-4 * vmax, step if math.isfinite(step) else 0.0)
     hi = min(0.1 * vmax, max(0.03 * vmax, 3.0 * float(band.noise.get(name, 0.0))))
     return (lo, max(hi, lo))
 

@@ -216,7 +216,9 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     nuis = list(nuisances)
     own = None
     if effect.nuisance is not None and not effect.integer and effect.fit_nuisance and not cand.fixed:
-        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), float(cand.nuisance), tied_to=tie)
+        span = effect.nuisance_span(placed, screen.free_run, _band(screen)) or (0.0, math.inf)
+        own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), min(max(float(cand.nuisance), span[0]), span[1]),
+                       tied_to=tie, bounds=(float(span[0]), float(span[1])))
         nuis.append(own)
     try:
         model, se, nuis = output_error_fit(trial, cols, dt, nuisances=nuis, iterations=iterations, **fit.kw)
@@ -241,10 +243,27 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
         return None
     delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
     plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
+    # a physical nuisance (a Stribeck velocity, a width) that the fit pushed to the edge of what the record shows
+    # is not estimated by it: the effect stands in for another there (a smoothing velocity is numerical: its edge
+    # is only the sharpest switch the record resolves)
+    edge = own is not None and effect.nuisance != "smoothing_velocity" and \
+        (nuis[-1].at_bound(-1.0) or nuis[-1].at_bound(1.0))
     cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
-                   explained={"size": size, "plausible": plausible, "correlation_factor": factor},
-                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible))
+                   explained={"size": size, "plausible": plausible, "correlation_factor": factor,
+                              "nuisance_at_bound": edge},
+                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible
+                                    and not edge))
     return _Trial(cand, model, nuis, own, new_cols)
+
+
+def _band(screen: OutputErrorScreen):
+    """The screen's record band (what its record can show), made once per screen."""
+    band = getattr(screen, "_record_band", None)
+    if band is None:
+        from ._ranking import record_band
+
+        band = screen._record_band = record_band(screen)
+    return band
 
 
 def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,

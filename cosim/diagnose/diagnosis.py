@@ -13,7 +13,8 @@
    scalar search, then **fit the leading candidates for real** (Gauss-Newton output error with the nuisance
    parameter) and judge them on the actual drop of the output error: the first-order score misleads when
    the model error is large. An effect whose fit has several minima in its nuisance (a Stribeck velocity, a
-   cogging's periods) is fitted from several values (:func:`~cosim.diagnose._starts.trial_fit`). A candidate
+   cogging's periods) is fitted from several values (:func:`~cosim.diagnose._starts.trial_fit`), and within the
+   span the record shows (:mod:`._record_band`; a physical one ending at its edge: not significant). A candidate
    is **significant** when its likelihood-ratio p-value is below `alpha`, it lowers BIC by more than
    `bic_margin`, *and* its correction moves at least `min_size` of the data's spread: the first two are strict
    because the search tries a few hundred candidates (data without an effect must give "no effect found"),

@@ -420,8 +420,7 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     for _ in range(iterations):  # steps needs them again, and each halving costs a simulation)
         jac = np.column_stack([screen.base, *_nuisance_columns(screen, current, nuis)])
         ties = _tie_map(screen, current, nuis, jac.shape[1])
-        reduced = jac @ ties
-        full = ties @ _gauss_newton_step(reduced, screen.residual)
+        full = _bounded_step(jac, ties, screen.residual, nuis, screen.base.shape[1])
         if _predicted_drop(jac, full) < tolerance * cost:
             break  # converged: the step would buy less than the tolerance
         accepted = False
@@ -466,6 +465,34 @@ def output_error_fit(model: IdentifiedModel, columns: Mapping[str, np.ndarray], 
     fitted = IdentifiedModel(states=current.states, inputs=current.inputs, terms=current.terms, coef=current.coef,
                              dt=current.dt, meta=meta)
     return fitted, se, nuis
+
+
+def _bounded_step(jac: np.ndarray, ties: np.ndarray, residual: np.ndarray, nuis: Sequence[Nuisance],
+                  first: int) -> np.ndarray:
+    """The Gauss-Newton step in the full parameters, with every nuisance the step would take out of its bounds
+    moved onto the bound (held there when it is already on it), and the other parameters solved again given
+    that move: an active set, so that the step stays a consistent descent step rather than the free one clipped
+    afterwards in one coordinate only."""
+    full = ties @ _gauss_newton_step(jac @ ties, residual)
+    fixed = {}
+    for j, nu in enumerate(nuis):
+        k = first + j
+        lo, hi = nu.bounds
+        move = float(np.clip(full[k], -1.0, 1.0))  # the log-step _apply takes
+        if nu.value * math.exp(move) < lo:
+            fixed[k] = max(math.log(lo / nu.value), -1.0) if nu.value > lo * (1.0 + 1e-12) else 0.0
+        elif nu.value * math.exp(move) > hi:
+            fixed[k] = min(math.log(hi / nu.value), 1.0) if nu.value < hi * (1.0 - 1e-12) else 0.0
+    if not fixed:
+        return full
+    held = list(fixed)
+    moves = np.array([fixed[k] for k in held])
+    rest = residual - jac[:, held] @ moves
+    jac = jac.copy()
+    jac[:, held] = 0.0
+    full = ties @ _gauss_newton_step(jac @ ties, rest)
+    full[held] = moves
+    return full
 
 
 def _gauss_newton_step(jac: np.ndarray, residual: np.ndarray) -> np.ndarray:
