@@ -205,3 +205,13 @@ def test_simulate_records_named_variables_and_fmu_info_lists_locals(tmp_path):
     info = json.loads(run("fmu", "info", "bundled", "--all", "--json").stdout)
     assert [v["name"] for v in info["locals"]] == ["der_theta_m", "der_omega_m", "der_theta_L", "der_omega_L"]
     assert "locals" not in json.loads(run("fmu", "info", "bundled", "--json").stdout)
+
+
+def test_every_command_that_writes_a_folder_or_file_takes_o():
+    """`-o` is how every command names where its result goes (`cosim identify -o`, `cosim diagnose -o`...): the
+    demo's folder too (`cosim demo -o DIR` was refused)."""
+    from cosim.cli import main
+
+    for name in ("demo", "identify", "diagnose", "simulate"):
+        option = next(p for p in main.commands[name].params if p.name in ("out_dir", "out"))
+        assert "-o" in option.opts, (name, option.opts)

@@ -10,7 +10,7 @@ __all__ = ["demo"]
 
 
 @click.command()
-@click.option("--out-dir", "--out", "out_dir", default="cosim-demo", show_default=True,
+@click.option("-o", "--out-dir", "--out", "out_dir", default="cosim-demo", show_default=True,
               type=click.Path(file_okay=False),
               help="Folder for the results.")
 @click.option("--progress/--no-progress", default=None,
