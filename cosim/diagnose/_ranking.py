@@ -150,12 +150,8 @@ def _better(cand: EffectCandidate, best: EffectCandidate, roles: Roles) -> bool:
 
 
 def record_band(screen: OutputErrorScreen) -> RecordBand:
-    """What the screen's record can show: its sample time, length, the states' noise levels and the positions'
-    visible bands (through the model), with the ranges of the free run's signals (the nuisance grids are scaled
-    on the noise-free free run)."""
-    return RecordBand.of(screen.free_run, screen.dt, dict(zip(screen.model.states, map(float, screen.sigma),
-                                                                strict=True)), model=screen.model,
-                         measured={s: screen.columns[s] for s in screen.measured})
+    """What the screen's record can show (:attr:`OutputErrorScreen.band`, made once per screen)."""
+    return screen.band
 
 
 def _round(screen: OutputErrorScreen, names: Sequence[str] | EffectSelection, alpha: float, bic_margin: float,

@@ -216,7 +216,7 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     nuis = list(nuisances)
     own = None
     if effect.nuisance is not None and not effect.integer and effect.fit_nuisance and not cand.fixed:
-        span = effect.nuisance_span(placed, screen.free_run, _band(screen)) or (0.0, math.inf)
+        span = effect.nuisance_span(placed, screen.free_run, screen.band) or (0.0, math.inf)
         own = Nuisance(lambda v, e=effect, a=placed: e.terms(a, v), min(max(float(cand.nuisance), span[0]), span[1]),
                        tied_to=tie, bounds=(float(span[0]), float(span[1])))
         nuis.append(own)
@@ -254,16 +254,6 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                    significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible
                                     and not edge))
     return _Trial(cand, model, nuis, own, new_cols)
-
-
-def _band(screen: OutputErrorScreen):
-    """The screen's record band (what its record can show), made once per screen."""
-    band = getattr(screen, "_record_band", None)
-    if band is None:
-        from ._ranking import record_band
-
-        band = screen._record_band = record_band(screen)
-    return band
 
 
 def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,

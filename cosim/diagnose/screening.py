@@ -63,6 +63,7 @@ from ._free_run import (
     noise_level,
 )
 from ._nuisance import Nuisance, _apply, _nuisance_columns, _tie_map
+from ._record_band import RecordBand
 from ._sensitivity import Propagator
 from .effects import Attachment, Effect, Roles
 
@@ -177,6 +178,14 @@ class OutputErrorScreen:
     def r_perp(self) -> np.ndarray:
         """The residual with its projection on the base removed."""
         return self.residual - self.q_base @ (self.q_base.T @ self.residual)
+
+    @cached_property
+    def band(self) -> RecordBand:
+        """What the record can show: its sample time, length, the states' noise levels and the positions' visible
+        bands (through the model), with the ranges of the free run's signals (the nuisance grids and spans are
+        scaled on the noise-free free run). Made once per screen."""
+        return RecordBand.of(self.free_run, self.dt, dict(zip(self.model.states, map(float, self.sigma), strict=True)),
+                             model=self.model, measured={s: self.columns[s] for s in self.measured})
 
     @cached_property
     def rss0(self) -> float:
@@ -479,10 +488,10 @@ def _bounded_step(jac: np.ndarray, ties: np.ndarray, residual: np.ndarray, nuis:
         k = first + j
         lo, hi = nu.bounds
         move = float(np.clip(full[k], -1.0, 1.0))  # the log-step _apply takes
-        if nu.value * math.exp(move) < lo:
-            fixed[k] = max(math.log(lo / nu.value), -1.0) if nu.value > lo * (1.0 + 1e-12) else 0.0
+        if nu.value * math.exp(move) < lo:  # (then log(lo / value) > move >= -1: within _apply's clip)
+            fixed[k] = 0.0 if nu.at_bound(-1.0) else math.log(lo / nu.value)
         elif nu.value * math.exp(move) > hi:
-            fixed[k] = min(math.log(hi / nu.value), 1.0) if nu.value < hi * (1.0 - 1e-12) else 0.0
+            fixed[k] = 0.0 if nu.at_bound(1.0) else math.log(hi / nu.value)
     if not fixed:
         return full
     held = list(fixed)
