@@ -125,7 +125,9 @@ def claims(spec: dict, effects: list[dict], ambiguous: list[dict] | None) -> dic
     allowed = names | {e["shows_as"] for e in truth if e.get("shows_as")}
     named = [e["name"] for e in effects]
     sets = [list(a.get("effects", [])) for a in (ambiguous or [])]
-    holding = [s for s in sets if len(s) <= 2 and names & set(s)]
+    # a set's "spring" is the linear model's spring to ground and constant: the truth of a record without effects
+    held = names | ({"spring"} if not truth else set())
+    holding = [s for s in sets if len(s) <= 2 and held & set(s)]
     covered = {n for s in holding for n in s}
     out: dict[str, Any] = {"named": named, "ambiguous_sets": sets, "ambiguous": bool(sets)}
     if not truth:
@@ -135,7 +137,7 @@ def claims(spec: dict, effects: list[dict], ambiguous: list[dict] | None) -> dic
     out["right_ambiguous"] = bool(not out["right_first"] and holding
                                   and (not named or named[0] in covered | allowed))
     wrong = [n for n in named if n not in allowed and n not in covered]
-    wrong += [n for s in sets if not names & set(s) for n in s if n not in allowed]
+    wrong += [n for s in sets if not held & set(s) for n in s if n not in allowed]
     out["wrong_claims"] = wrong
     out["false_claim"] = bool(wrong)
     return out

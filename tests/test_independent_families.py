@@ -149,6 +149,9 @@ def test_the_scoring_counts_an_ambiguity_set_apart_and_a_shown_offset_as_no_fals
     assert not out["right_first"] and out["right_ambiguous"] and not out["false_claim"]
     assert scoring.claims(gravity, [{"name": "offset"}], [])["false_claim"]
     assert scoring.claims({"effects": []}, [], both)["false_claim"]  # a set on a record without an effect
+    # the linear model's spring is the truth of a record without effects: a gravity-or-spring set holds it
+    spring = scoring.claims({"effects": []}, [], [{"effects": ["gravity", "spring"], "attached_to": "x"}])
+    assert not spring["false_claim"] and spring["right_ambiguous"] and not spring["right_first"]
     one_way = {"effects": [{"name": "coulomb_friction", "at": "v", "shows_as": "offset"}]}
     out = scoring.claims(one_way, [{"name": "offset"}], [])
     assert out["right_first"] and not out["false_claim"]

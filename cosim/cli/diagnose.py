@@ -9,7 +9,7 @@ import click
 
 from ..errors import DataError, InvalidSettingError
 from ..numbers import parse_number
-from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _split
+from ._command import _decimate_option, _emit, _friendly, _names, _pairs, _resolve_fmu, _settings, _split
 from ._data_options import data_options, derive_option, read_records
 from ._outputs import check_outputs
 
@@ -49,6 +49,10 @@ DIAGNOSE_MIN_SAMPLES = 200
               help="Identify and search at the record's step times N (measured signals low-pass filtered, inputs "
                    "averaged), then refit at the record's own step; auto: down to ten times the record's band on "
                    "records of more than 4000 samples; 1: never.")
+@click.option("--plant", default=None, metavar="FMU|bundled",
+              help="An FMU of the plant: where the data leave two readings open (gravity or a spring over small "
+                   "swings), run the experiment that separates them on it and diagnose again beside its record.")
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE", help="A parameter of the --plant FMU (repeat).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Write an HTML report (PNG plots beside it).")
 @click.option("-o", "--output", "out", type=click.Path(dir_okay=False), default=None,
@@ -60,7 +64,7 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
                      user_candidates: tuple[str, ...],
                      kinematics: str, derive: str | None, derive_window: int | None, time_column: str | None,
                      resample: bool, max_effects: int, initial_state: str, noise: str | None, decimate: str,
-                     report_path: str | None,
+                     plant: str | None, sets: tuple[str, ...], report_path: str | None,
                      out: str | None, as_json: bool) -> None:
     """Find the physical effect a model lacks in measured data, add it, and report the error before and after.
 
@@ -74,7 +78,9 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
       cosim diagnose DATA_EMPS.mat --state qm,qm_dot --input "force=35.15*vir" --derive qm --json
       cosim diagnose run1.csv run2.csv --state x,v --input u
       cosim diagnose tanks.csv --state h1,h2 --input q --candidate "orifice: -a*sqrt(abs(h1))"
+      cosim diagnose swing.csv --state theta_m,omega_m,theta_L,omega_L --input Tm --plant bundled --set mgl=4440
     """
+    from ..diagnose.ambiguity import check_plant
     from ..diagnose.diagnosis import BASE_SETTINGS, diagnose
     from ..diagnose.effects import effect_selection
     from ..diagnose.user_candidates import candidate
@@ -90,6 +96,11 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     extra = [candidate(text, signals=[*state_names, *input_names]) for text in user_candidates]  # before any run
     derived = derive_option(derive)
     known = _kinematics_option(kinematics, state_names)
+    if sets and not plant:
+        raise InvalidSettingError("--set sets a parameter of the --plant FMU; give --plant FMU too")
+    plant_path = _resolve_fmu(plant) if plant else None
+    if plant_path is not None:
+        check_plant(plant_path, [*state_names, *input_names])  # before any run
     records = read_records(data_paths, states=state_names, inputs=input_specs, derive=derived, time=time_column,
                            derive_window=derive_window, resample=resample)
     for path, data in zip(data_paths, records, strict=True):
@@ -110,7 +121,8 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
     levels = {name: parse_number(text, what=f"--noise {name}")
               for name, text in _pairs(tuple(_split(noise)), "--noise").items()} if noise else None
     report = diagnose(model, records if len(records) > 1 else records[0], effects=selection,
-                      max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor, candidates=extra)
+                      max_effects=max_effects, x0=initial_state, noise=levels, decimate=factor, candidates=extra,
+                      plant=plant_path, plant_parameters=_settings(sets, "--set") if sets else None)
     payload = report.to_dict()
     if report_path:
         payload["report"] = str(report.write_report(
@@ -130,6 +142,9 @@ def diagnose_command(data_paths: tuple[str, ...], states: str, inputs: str, mode
         lines.append(f"  rejected: {c.name} on {c.attached_to}: held-out NRMSE "
                      f"{c.explained.get('held_out_nrmse_without_pct', float('nan')):.4g} % without, "
                      f"{c.explained.get('held_out_nrmse_with_pct', float('nan')):.4g} % with it")
+    for e in report.experiments:
+        lines.append(f"  experiment run on the plant ({' or '.join(e['effects'])}): the input x{e['input_scale']:g}, "
+                     f"{e['signal']} swinging ±{e['swing']:.3g}")
     if report.dropped_terms:
         lines.append("  terms no longer needed: " + ", ".join(report.dropped_terms))
     rate = report.analysis

@@ -10,6 +10,8 @@
 * :mod:`~cosim.diagnose.diagnosis` - :func:`diagnose`: screen, fit, judge, add, repeat (one screening round in
   ``_ranking``, the trial fits in ``_trials``);
 * :mod:`~cosim.diagnose.diagnosis_report` - the :class:`DiagnosisReport`;
+* :mod:`~cosim.diagnose.ambiguity` - readings the data cannot tell apart (``ambiguous``) and the experiment
+  that would, run on an FMU of the plant when one is given;
 * :mod:`~cosim.diagnose.user_candidates` - :func:`candidate`: an effect a user brings, an expression of the
   signals with named parameters (``"orifice: -a*sqrt(abs(h1))"``) or a Python callable.
 

@@ -14,10 +14,12 @@ from typing import Any
 
 import numpy as np
 
+from ..data.trajectory import Trajectory
 from ..errors import InvalidSettingError
 from ..identify.model import IdentifiedModel
 
-__all__ = ["correlation_factor", "free_run_cost", "free_run_residual", "measured_weights", "noise_level"]
+__all__ = ["checked_noise", "correlation_factor", "free_run_cost", "free_run_residual", "measured_states",
+           "measured_weights", "noise_level"]
 
 
 def _bounds(segments: Sequence[int] | None, length: int) -> list[tuple[int, int]]:
@@ -153,3 +155,31 @@ def correlation_factor(residual: np.ndarray, lags: int = 50) -> float:
         rho = np.array([float(c[k:] @ c[:-k]) / var for k in range(1, lags + 1)])
         factors.append(1.0 + 2.0 * float(weights @ rho))
     return max(1.0, float(np.mean(factors))) if factors else 1.0
+
+
+def checked_noise(model: IdentifiedModel, noise: Mapping[str, float] | None) -> dict[str, float] | None:
+    """`diagnose`'s `noise`, checked: positive levels of the model's states."""
+    if not noise:
+        return None
+    for name, level in noise.items():
+        if name not in model.states:
+            raise InvalidSettingError(f"noise names {name!r}, which is not a state of the model; states are "
+                                      f"{list(model.states)}")
+        if not (math.isfinite(float(level)) and float(level) > 0):
+            raise InvalidSettingError(f"the noise level of {name!r} must be positive, got {level}")
+    return {name: float(level) for name, level in noise.items()}
+
+
+def measured_states(model: IdentifiedModel, records: Sequence[Trajectory],
+              noise: Mapping[str, float] | None) -> tuple[str, ...] | None:
+    """The states that are measurements: all but the velocities derived from measured positions (their
+    derivative filter's output is no measurement and would count the position's noise twice), unless a noise
+    level is given for one. None when all are measured."""
+    derived: set[str] = set()
+    for record in records:
+        info = (record.meta or {}).get("data_file", {}) if isinstance(record.meta, Mapping) else {}
+        of = (info.get("derivatives") or {}).get("of", ()) if isinstance(info, Mapping) else ()
+        derived.update(f"{p}_dot" for p in of)
+    derived -= set(noise or ())
+    measured = tuple(s for s in model.states if s not in derived)
+    return None if len(measured) == len(model.states) or not measured else measured

@@ -61,6 +61,7 @@ Examples
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -75,6 +76,7 @@ from ..data.trajectory import Trajectory
 from ..errors import DataError, InvalidSettingError
 from ..identify.model import IdentifiedModel
 from ._analysis_rate import analysis_factor, at_record_rate
+from ._free_run import checked_noise, measured_states
 from ._holdout import LATER_GAIN, REBASED_GAIN, HeldOutCheck
 from ._ranking import _round, check_effect_selection, record_band
 from ._stable_final import stable_if_free
@@ -92,6 +94,7 @@ from ._trials import (
     _retest_base,
     _sigma,
 )
+from .ambiguity import check_plant, settled
 from .candidates import EffectCandidate, registered
 from .diagnosis_report import DiagnosisReport, _figures, _message
 from .effects import EFFECTS, Effect, effect_names
@@ -183,34 +186,6 @@ def _initial_state(model: IdentifiedModel, records: Sequence[Trajectory],
     return values
 
 
-def _noise(model: IdentifiedModel, noise: Mapping[str, float] | None) -> dict[str, float] | None:
-    """`diagnose`'s `noise`, checked: positive levels of the model's states."""
-    if not noise:
-        return None
-    for name, level in noise.items():
-        if name not in model.states:
-            raise InvalidSettingError(f"noise names {name!r}, which is not a state of the model; states are "
-                                      f"{list(model.states)}")
-        if not (math.isfinite(float(level)) and float(level) > 0):
-            raise InvalidSettingError(f"the noise level of {name!r} must be positive, got {level}")
-    return {name: float(level) for name, level in noise.items()}
-
-
-def _measured(model: IdentifiedModel, records: Sequence[Trajectory],
-              noise: Mapping[str, float] | None) -> tuple[str, ...] | None:
-    """The states that are measurements: all but the velocities derived from measured positions (their
-    derivative filter's output is no measurement and would count the position's noise twice), unless a noise
-    level is given for one. None when all are measured."""
-    derived: set[str] = set()
-    for record in records:
-        info = (record.meta or {}).get("data_file", {}) if isinstance(record.meta, Mapping) else {}
-        of = (info.get("derivatives") or {}).get("of", ()) if isinstance(info, Mapping) else ()
-        derived.update(f"{p}_dot" for p in of)
-    derived -= set(noise or ())
-    measured = tuple(s for s in model.states if s not in derived)
-    return None if len(measured) == len(model.states) or not measured else measured
-
-
 def _with_columns(traj: Trajectory, columns: Mapping[str, np.ndarray]) -> Trajectory:
     """`traj` plus the derived columns (a delayed input) that it lacks."""
     extra = {k: v for k, v in columns.items() if k not in traj.names}
@@ -227,7 +202,8 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
              bic_margin: float = BIC_MARGIN, min_size: float = MIN_SIZE, reference: Trajectory | None = None,
              x0: str | Sequence[float] = "estimate", noise: Mapping[str, float] | None = None,
              held_out: bool = True, decimate: int | str = "auto", progress: bool | None = None,
-             candidates: Sequence[Effect] = ()) -> DiagnosisReport:
+             candidates: Sequence[Effect] = (), plant: str | os.PathLike | None = None,
+             plant_parameters: Mapping[str, float] | None = None) -> DiagnosisReport:
     """Find the effects `model` lacks in `data`, add them, and report the error before and after.
 
     Parameters
@@ -275,6 +251,10 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     candidates : sequence of Effect
         Effects the user brings (:func:`~cosim.diagnose.user_candidates.candidate`), searched, scored and
         reported beside the catalogue's (their names must differ from the catalogue's).
+    plant : path-like, optional
+        An FMU of the plant (with `plant_parameters` set): where the data leave two readings within the margin
+        (``ambiguous``: gravity or a spring over small swings), the experiment that separates them is run on it
+        and the data are diagnosed again beside its record (:mod:`~cosim.diagnose.ambiguity`).
 
     Returns
     -------
@@ -282,10 +262,17 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     """
     # the work is tall, thin least squares and small matrix products: threaded BLAS only adds overhead
     # (3x slower on 2 cores)
+    if plant is not None:
+        check_plant(plant, (*model.states, *model.inputs))  # (before the search)
     with registered(candidates, effects) as effects, threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(model, data, effects=effects, max_effects=max_effects, alpha=alpha, bic_margin=bic_margin,
-                         min_size=min_size, reference=reference, x0=x0, noise=noise, held_out=held_out,
-                         decimate=decimate, progress=progress)
+        def run(records: Trajectory | Sequence[Trajectory]) -> DiagnosisReport:
+            return _diagnose(model, records, effects=effects, max_effects=max_effects, alpha=alpha,
+                             bic_margin=bic_margin, min_size=min_size, reference=reference, x0=x0, noise=noise,
+                             held_out=held_out, decimate=decimate, progress=progress)
+        given = _records(model, data)
+        return settled(run(data), given, effect_names(effects), margin=bic_margin,
+                       noise=checked_noise(model, noise), measured=measured_states(model, given, noise), plant=plant,
+                       parameters=plant_parameters, rediagnose=run)
 
 
 def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *, effects: str | Sequence[str],
@@ -305,8 +292,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             raise DataError(f"input {name!r} is constant: nothing to diagnose from; excite the plant")
     segments = starts if len(records) > 1 else None
     start = _initial_state(model, given, x0)
-    fit = _FitOptions(estimate_x0=start is None, noise=_noise(model, noise), segments=segments,
-                      measured=_measured(model, given, noise))
+    fit = _FitOptions(estimate_x0=start is None, noise=checked_noise(model, noise), segments=segments,
+                      measured=measured_states(model, given, noise))
     given_fit = replace(fit, segments=given_starts if segments is not None else None)
     if factor > 1:  # the noise levels of the records as given, less what the decimation's filter took off
         fit = replace(fit, noise=dict(zip(model.states, (_sigma(model, given_columns, given_fit) *

@@ -29,6 +29,8 @@ from .residuals import ResidualAnalysis
 if TYPE_CHECKING:
     import matplotlib.figure
 
+    from .ambiguity import Ambiguity
+
 __all__ = ["DiagnosisReport"]
 
 
@@ -71,6 +73,13 @@ class DiagnosisReport:
         The step the search ran at: ``decimation`` (the factor the records were decimated by; 1: none), ``dt``
         and ``record_dt`` in s. `rounds`, `trials`, `steps` and `rejected` are of that step; `effects`,
         `model_after` and the figures of the records' own.
+    ambiguous : tuple of Ambiguity
+        Readings these data cannot tell apart (gravity or a spring to ground over small swings), each with the
+        experiment that would (:mod:`~cosim.diagnose.ambiguity`).
+    experiments : tuple of dict
+        Experiments run on a plant (``plant=``) to settle an ambiguity: ``effects``, ``input_scale``,
+        ``signal``, ``swing`` (half its range in the run), ``samples``; their records were diagnosed beside the
+        data's.
     """
 
     effects: tuple[EffectCandidate, ...]
@@ -89,6 +98,8 @@ class DiagnosisReport:
     rejected: tuple[EffectCandidate, ...] = ()
     dropped_terms: tuple[str, ...] = ()
     analysis: dict[str, Any] = field(default_factory=dict)
+    ambiguous: tuple[Ambiguity, ...] = ()
+    experiments: tuple[dict[str, Any], ...] = ()
 
     @property
     def found(self) -> bool:
@@ -103,7 +114,9 @@ class DiagnosisReport:
                              "significant": c.significant, "parameters": dict(c.parameters)} for c in round_]
                            for round_ in self.trials],
                 "rejected": [e.to_dict() for e in self.rejected], "dropped_terms": list(self.dropped_terms),
-                "analysis": dict(self.analysis),
+                "analysis": dict(self.analysis), "ambiguous": [a.to_dict() for a in self.ambiguous],
+                "to_separate": [{"effects": list(a.effects), **a.to_separate} for a in self.ambiguous],
+                "experiments": [dict(e) for e in self.experiments],
                 "equations_after": self.model_after.equations()}
 
     def plot_evidence(self, path: str | os.PathLike | None = None, *, bins: int = 30) -> matplotlib.figure.Figure:
@@ -250,6 +263,9 @@ class DiagnosisReport:
         if self.rejected:
             more.append(("Not claimed", "; ".join(f"{c.name} on {c.attached_to}" for c in self.rejected)
                          + ": better on the data fitted to, not on held-out data"))
+        more += [("Cannot tell apart", a.sentence()) for a in self.ambiguous]
+        more += [("Experiment run", f"{', '.join(e['effects'])}: the record's input x{e['input_scale']:g} on the "
+                  f"plant, {e['signal']} swinging ±{e['swing']:.3g}") for e in self.experiments]
         return {"plant": plant, "data": data, "context": context, "effects": [e.to_dict() for e in self.effects],
                 "no_effect": self.message.removeprefix("no effect found: "), "errors": errors,
                 "error_label": f"free-run NRMSE, % of each state's spread, against {against} (lower is better)",

@@ -1,0 +1,387 @@
+"""Readings the data cannot tell apart, and the experiment that would: a diagnosis's ``ambiguous`` sets.
+
+A catalogued effect whose linearisation is a few of the base model's terms (:attr:`Effect.absorbs`: gravity's
+``sin x`` over a small swing is a spring to ground ``x`` and a constant) is, on a record that stays where the
+linearisation holds, another reading of the same data: the linear model with a spring to ground and the model
+with gravity in its place fit alike. The search then names nothing, and that is right as far as it goes; but
+"no effect" hides a question these data cannot answer. :func:`linearisation_ambiguities` asks it:
+
+1. does the record show the restoring force at all? (the model without the spring to ground, refitted, is
+   worse by more than the margin; a coupling to another position, ``c_q q + c_p p``, is kept as the twist
+   ``c_q (q - p)``, and only ``(c_q + c_p) p`` goes to ground);
+2. the effect's reading: the spring and the constant replaced by the effect's terms (their least-squares match
+   on the record), refitted by output error;
+3. if the two readings' BIC are within the margin the diagnosis needs for any claim, they form a set
+   (:class:`Ambiguity`), and :func:`separating_experiment` finds the input that tells them apart: the record's
+   own input scaled up (1.5x to 20x) until the two readings' free runs differ by at least the noise level
+   (RMS, in some state) and the search could try the effect on it (its span rule), and the swing that input
+   reaches. Readings alike under every scale tried are left out: one model for every use the data serve.
+
+:func:`rival_ambiguities` adds the other kind: a named effect whose round had another effect's trial fit within
+the margin (a sine and its cubic over a swing of a third of a radian); the record that would separate them is a
+wider range of the signal they act on.
+
+:func:`run_experiment` runs that input on an FMU of the plant (``cosim diagnose --plant``) and returns the record
+a second diagnosis takes beside the first, with measurement noise at the level the first record shows
+(seeded: the same answer on every run); :func:`settled` goes on with the next larger scale while a set of
+amplitude remains, up to :data:`MAX_EXPERIMENTS` runs. Written here because no library of the field reports equivalent
+readings of a record or designs the experiment between two of them.
+
+Examples
+--------
+>>> from cosim.diagnose.ambiguity import Ambiguity
+>>> a = Ambiguity(("gravity", "spring"), "theta", ("gravity on theta", "a spring to ground on theta and a "
+...               "constant"), 3.0, 30.0, {"quantity": "amplitude", "signal": "theta", "at_least": 0.62,
+...               "now": 0.15, "input_scale": 5.0})
+>>> a.sentence()[:60]
+'gravity on theta or a spring to ground on theta and a consta'
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..data.trajectory import Trajectory
+from ..errors import DataError
+from ..identify.model import IdentifiedModel
+from ._free_run import noise_level
+from ._record_band import RecordBand
+from .diagnosis_report import DiagnosisReport
+from .effects import EFFECTS, Roles
+from .screening import output_error_fit
+
+__all__ = ["Ambiguity", "check_plant", "linearisation_ambiguities", "rival_ambiguities", "run_experiment",
+           "separating_experiment", "settled"]
+
+#: How far apart (RMS over the record, in noise levels of some state) two readings' free runs must be for an
+#: experiment to separate them: a difference the size of the noise on every sample, which the other errors of
+#: a model do not hide.
+SEPARATION = 1.0
+#: The scales of the record's input tried, smallest first.
+INPUT_SCALES = (1.5, 2.0, 3.0, 5.0, 8.0, 13.0, 20.0)
+#: Gauss-Newton iterations of the readings' fits.
+ITERATIONS = 15
+#: Seed of the measurement noise added to an experiment run on an FMU.
+EXPERIMENT_SEED = 0
+
+
+@dataclass(frozen=True)
+class Ambiguity:
+    """Two readings of the data within the evidence margin of each other, and the experiment between them.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The readings' names: the effect and what stands for it in the model (``("gravity", "spring")``).
+    attached_to : str
+        The signal the effect acts on in its best reading.
+    readings : tuple of str
+        Each reading in words.
+    delta_bic : float
+        The effect's reading's BIC minus the model's (negative: the effect fits a little better).
+    margin : float
+        The BIC change the diagnosis needs for a claim; the two readings are closer than it.
+    to_separate : dict
+        The experiment: ``quantity`` ("amplitude"), ``signal``, ``at_least`` (the swing, half the range, it
+        reaches), ``now`` (the record's), ``input_scale`` (the record's input times it); ``at_least`` is None
+        when no scale up to the largest tried separates them.
+    models : tuple of IdentifiedModel
+        The two readings, fitted (the model's first).
+    places : tuple of str
+        Every place where the effect's reading is within the margin of the best (``attached_to`` among them).
+    """
+
+    effects: tuple[str, ...]
+    attached_to: str
+    readings: tuple[str, ...]
+    delta_bic: float
+    margin: float
+    to_separate: dict[str, Any]
+    models: tuple[IdentifiedModel, ...] = field(default=(), repr=False, compare=False)
+    places: tuple[str, ...] = ()
+
+    def sentence(self) -> str:
+        """What the data cannot tell, and what would."""
+        s = self.to_separate
+        said = (f"{' or '.join(self.readings)}: these data cannot tell them apart (BIC {abs(self.delta_bic):.3g} "
+                f"apart, a claim needs {self.margin:g})")
+        if s.get("at_least") is None:
+            return said + f"; a record over a wider {s['quantity']} of {s['signal']} would separate them"
+        return (said + f"; swings of at least ±{s['at_least']:.3g} on {s['signal']} (the record's input "
+                f"x{s['input_scale']:g}; it swings ±{s['now']:.3g} now) would separate them")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"effects": list(self.effects), "attached_to": self.attached_to,
+                "places": list(self.places or (self.attached_to,)), "readings": list(self.readings),
+                "delta_bic": self.delta_bic, "margin": self.margin, "to_separate": dict(self.to_separate),
+                "sentence": self.sentence()}
+
+
+def _columns(model: IdentifiedModel, record: Trajectory) -> dict[str, np.ndarray]:
+    return {n: np.asarray(record[n], dtype=float) for n in (*model.states, *model.inputs)}
+
+
+def _bic(fitted: IdentifiedModel, n_obs: int) -> float:
+    """BIC up to a constant: the output-error cost and the model's coefficients."""
+    return n_obs * math.log(float(fitted.meta["refinement"]["cost"])) + np.count_nonzero(fitted.coef) * math.log(n_obs)
+
+
+def _fit(model: IdentifiedModel, cols: dict[str, np.ndarray], dt: float, noise: Mapping[str, float],
+         measured: Sequence[str] | None) -> tuple[IdentifiedModel, np.ndarray] | None:
+    try:
+        return output_error_fit(model, cols, dt, iterations=ITERATIONS, noise=noise, measured=measured)[:2]
+    except (DataError, np.linalg.LinAlgError, FloatingPointError):
+        return None  # (a reading whose free run diverges on the record is no reading of it)
+
+
+def _reading(model: IdentifiedModel, roles: Roles, position: str, rows: Sequence[int], terms: tuple[str, ...] | None,
+             cols: Mapping[str, np.ndarray]) -> IdentifiedModel:
+    """`model` with its spring to ground on `position` in `rows` taken out: a coupled position's coefficient
+    moved onto the twist ``(q-position)`` (``c_q q + c_p p = c_q (q - p) + (c_q + c_p) p``), the rest, the spring
+    to ground, dropped (``terms=None``) or, with the row's constant, replaced by the effect's `terms` (their
+    least-squares match on the record)."""
+    coupled = sorted({b if a == position else a for a, b in roles.pairs if position in (a, b)} & set(model.terms))
+    twists = [f"({q}-{position})" for q in coupled]
+    names = list(model.terms) + [t for t in (*twists, *(terms or ())) if t not in model.terms]
+    coef = np.zeros((len(model.states), len(names)))
+    coef[:, :len(model.terms)] = model.coef
+    wide = replace(model, terms=tuple(names), coef=coef)
+    X = np.column_stack([cols[s] for s in model.states])
+    U = np.column_stack([cols[u] for u in model.inputs]) if model.inputs else np.zeros((len(X), 0))
+    F = wide.features(X, U)
+    k_p = names.index(position)
+    for i in rows:
+        for q, twist in zip(coupled, twists, strict=True):
+            coef[i, names.index(twist)] = coef[i, names.index(q)]
+            coef[i, k_p] += coef[i, names.index(q)]
+            coef[i, names.index(q)] = 0.0
+        if terms is None:
+            coef[i, k_p] = 0.0
+            continue
+        k_e = [names.index(t) for t in terms]
+        moved = [k_p] + ([names.index("1")] if "1" in names else [])
+        coef[i, k_e] = np.linalg.lstsq(F[:, k_e], F[:, moved] @ coef[i, moved], rcond=None)[0]
+        coef[i, moved] = 0.0
+    keep = [k for k in range(len(names)) if np.any(coef[:, k])]
+    return replace(wide, terms=tuple(names[k] for k in keep), coef=coef[:, keep],
+                   meta={k: v for k, v in model.meta.items() if k == "x0"})
+
+
+def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names: Sequence[str], *,
+                              found: Sequence[tuple[str, str]] = (), margin: float = 30.0,
+                              noise: Mapping[str, float] | None = None,
+                              measured: Sequence[str] | None = None) -> list[Ambiguity]:
+    """The effects among `names` that are another reading of `model`'s spring to ground and constant on
+    `record` (see the module notes): one :class:`Ambiguity` per effect, at its best place.
+
+    Parameters
+    ----------
+    model : IdentifiedModel
+        The diagnosed model (its effects added).
+    record : Trajectory
+        The record it was diagnosed on (the first, with any column an effect added).
+    names : sequence of str
+        The effects searched.
+    found : sequence of (name, attached_to)
+        The effects named: not asked again.
+    margin : float
+        The BIC change a claim needs.
+    noise, measured
+        As in :func:`~cosim.diagnose.diagnosis.diagnose`.
+    """
+    roles = Roles.of(model)
+    cols = _columns(model, record)
+    dt = float(record.dt)
+    levels = {s: float(noise[s]) if noise and s in noise else noise_level(cols[s]) for s in model.states}
+    n_obs = len(record) * len(measured if measured is not None else model.states)
+    fitted = None
+    out = []
+    for name in names:
+        effect = EFFECTS.get(name)
+        if effect is None or effect.absorbs is None or name in {f for f, _ in found}:
+            continue  # (named: where it sits was the search's to judge)
+        readings = []
+        for a in effect.attachments(roles):
+            position = a.signals[0]
+            if (name, a.label) in found or position not in model.terms:
+                continue
+            fitted = fitted or _fit(model, cols, dt, levels, measured)
+            if fitted is None:
+                return out
+            base = fitted[0]
+            rows = [model.states.index(r) for r in a.rows if base.coef[model.states.index(r),
+                                                                       base.terms.index(position)] != 0.0]
+            free = _fit(_reading(base, roles, position, rows, None, cols), cols, dt, levels, measured)
+            if not rows or (free is not None and _bic(free[0], n_obs) - _bic(base, n_obs) < margin):
+                continue  # the record shows no spring to ground: nothing the effect could stand for
+            read = _fit(_reading(base, roles, position, rows, effect.make_terms(a, None), cols), cols, dt, levels,
+                        measured)
+            if read is None:
+                continue
+            other = read[0]
+            delta = _bic(other, n_obs) - _bic(base, n_obs)
+            if abs(delta) <= margin:
+                readings.append((delta, a.label, position, other))
+        if not readings:
+            continue
+        # the best reading's place, and every place within the margin of it (on a stiff coupling the data
+        # cannot tell the two ends apart either: listed in the model's order, not picked by rounding)
+        delta, label, position, other = min(readings, key=lambda r: r[0])
+        places = [r[1] for r in readings if r[0] - delta <= margin]
+        def searchable(run: dict[str, np.ndarray], span=effect.span, label: str = label,
+                       position: str = position) -> bool:
+            return span is None or span(run[position], RecordBand.of(run, dt, levels), label) is not None
+        experiment = separating_experiment(fitted[0], other, cols, dt, levels, position, searchable)
+        if experiment["input_scale"] is None:
+            continue  # (alike under every input up to 20x the record's: one model for every use the data serve)
+        out.append(Ambiguity((name, "spring"), label, (f"{name} on {' or '.join(places)}",
+                             f"a spring to ground on {' or '.join(places)} and a constant"), float(delta),
+                             float(margin), experiment, (fitted[0], other), tuple(places)))
+    return out
+
+
+def _free_run(model: IdentifiedModel, U: np.ndarray, dt: float) -> np.ndarray | None:
+    x0 = np.asarray(model.meta["x0"], dtype=float).reshape(-1, len(model.states))[0]
+    sim = model.simulate(x0, U[:-1], dt=dt)
+    return sim.states if sim.ok else None
+
+
+def separating_experiment(first: IdentifiedModel, second: IdentifiedModel, cols: Mapping[str, np.ndarray],
+                          dt: float, noise: Mapping[str, float], signal: str,
+                          searchable: Callable[[dict[str, np.ndarray]], bool] | None = None) -> dict[str, Any]:
+    """The least scale of the record's input (:data:`INPUT_SCALES`) under which the two readings' free runs
+    differ by :data:`SEPARATION` noise levels (RMS) in some state, and where the search can try the effect on
+    the second's run (`searchable`, from its signals: gravity's span wants half a radian of range), and the
+    swing of `signal` it reaches."""
+    U = np.column_stack([cols[u] for u in first.inputs]) if first.inputs else np.zeros((len(cols[signal]), 0))
+    k = first.states.index(signal)
+    sigma = np.array([noise[s] for s in first.states])
+    now = float(np.ptp(cols[signal])) / 2
+    for scale in INPUT_SCALES:
+        a, b = _free_run(first, U * scale, dt), _free_run(second, U * scale, dt)
+        if a is None or b is None:
+            break  # (a reading diverging is no experiment to run on a plant)
+        apart = float(np.max(np.sqrt(np.mean((a - b) ** 2, axis=0)) / sigma)) >= SEPARATION
+        if apart and (searchable is None or searchable(dict(zip(second.states, b.T, strict=True)))):
+            return {"quantity": "amplitude", "signal": signal, "at_least": float(np.ptp(b[:, k])) / 2, "now": now,
+                    "input_scale": scale}
+    return {"quantity": "amplitude", "signal": signal, "at_least": None, "now": now, "input_scale": None}
+
+
+def run_experiment(plant: str | os.PathLike, record: Trajectory, model: IdentifiedModel, scale: float, *,
+                   parameters: Mapping[str, float] | None = None, noise: Mapping[str, float] | None = None,
+                   ) -> Trajectory:
+    """The record's input times `scale` run on the FMU `plant` (its `parameters` set), `model`'s states and
+    inputs recorded, each state with Gaussian noise at the record's level (`noise`, else estimated from it;
+    seed :data:`EXPERIMENT_SEED`).
+
+    Raises
+    ------
+    DataError
+        When the FMU lacks one of the model's signals.
+    """
+    from ..data.simulation import simulate
+
+    check_plant(plant, (*model.states, *model.inputs))
+    dt, n = float(record.dt), len(record)
+    inputs = {u: np.asarray(record[u], dtype=float) * scale for u in model.inputs}
+    run = simulate(plant, inputs, duration=dt * (n - 1), dt=dt, parameters=dict(parameters or {}),
+                   outputs=list(model.states), progress=False)
+    rng = np.random.default_rng(EXPERIMENT_SEED)
+    cols = {u: np.asarray(run[u], dtype=float) for u in model.inputs}
+    for s in model.states:
+        level = float(noise[s]) if noise and s in noise else noise_level(np.asarray(record[s], dtype=float))
+        cols[s] = np.asarray(run[s], dtype=float) + rng.normal(0.0, level, len(run))
+    return Trajectory.from_arrays(np.asarray(run.time), cols, roles={**dict.fromkeys(model.states, "state"),
+                                                                     **dict.fromkeys(model.inputs, "input")})
+
+
+def check_plant(plant: str | os.PathLike, signals: Sequence[str]) -> None:
+    """Refuse, in one line, an FMU that lacks one of the data's `signals` (a model's states and inputs), before
+    any work."""
+    from ..plant.model_description import open_model_description
+
+    known = {v.name for v in open_model_description(plant).modelVariables}
+    missing = [s for s in signals if s not in known]
+    if missing:
+        raise DataError(f"the plant {os.fspath(plant)!r} has no variable {', '.join(map(repr, missing))} of the "
+                        f"data; give the FMU of the plant that recorded them (--plant)")
+
+
+#: What a wider range of the signal an effect attaches to means, by the kind of signal.
+QUANTITY = {"position": "amplitude", "pair": "amplitude", "position_or_pair": "amplitude", "velocity": "speed range",
+            "input": "input amplitude", "none": "amplitude"}
+
+
+def rival_ambiguities(report: DiagnosisReport, margin: float) -> list[Ambiguity]:
+    """Each named effect whose round had another effect's trial fit within `margin` of its own (BIC): the two
+    readings, and the kind of record that would separate them (a wider range of the signal it attaches to)."""
+    out = []
+    for e in report.effects:
+        for trials in report.trials:
+            mine = next((c for c in trials if (c.name, c.attached_to) == (e.name, e.attached_to)), None)
+            rivals = [c for c in trials if mine is not None and c.significant and c.name != e.name
+                      and abs(c.delta_bic - mine.delta_bic) <= margin]
+            if not rivals:
+                continue
+            r = min(rivals, key=lambda c: (c.delta_bic, c.name))
+            signal = e.attached_to.split("-")[0]
+            now = (float(np.ptp(report.data[signal])) / 2 if report.data is not None and signal in report.data.names
+                   else None)
+            kind = QUANTITY.get(EFFECTS[e.name].attaches_to, "amplitude") if e.name in EFFECTS else "amplitude"
+            out.append(Ambiguity((e.name, r.name), e.attached_to, (f"{e.name} on {e.attached_to}",
+                                 f"{r.name} on {r.attached_to}"), float(r.delta_bic - mine.delta_bic), float(margin),
+                                 {"quantity": kind, "signal": signal, "at_least": None, "now": now,
+                                  "input_scale": None}, (), tuple(dict.fromkeys((e.attached_to, r.attached_to)))))
+            break
+    return out
+
+
+#: Most experiments run on a plant to settle the sets (each the next larger input scale when a set remains).
+MAX_EXPERIMENTS = 3
+
+
+def _said(message: str, sets: Sequence[Ambiguity]) -> str:
+    return "; ".join([message, *(a.sentence() for a in sets)])
+
+
+def settled(report: DiagnosisReport, records: Sequence[Trajectory], names: Sequence[str], *, margin: float,
+            noise: Mapping[str, float] | None, measured: Sequence[str] | None,
+            plant: str | os.PathLike | None = None, parameters: Mapping[str, float] | None = None,
+            rediagnose: Callable[[list[Trajectory]], DiagnosisReport] | None = None) -> DiagnosisReport:
+    """`report` with the readings its data cannot tell apart (:func:`linearisation_ambiguities`); with a
+    `plant`, each set's experiment run on it (:func:`run_experiment`) and the `records` diagnosed again beside
+    those runs (`rediagnose`), the answer of both."""
+    def sets_of(rep: DiagnosisReport) -> list[Ambiguity]:
+        if rep.data is None:
+            return rival_ambiguities(rep, margin)
+        return rival_ambiguities(rep, margin) + linearisation_ambiguities(
+            rep.model_after, rep.data, names, margin=margin, noise=noise, measured=measured,
+            found=[(e.name, e.attached_to) for e in rep.effects])
+
+    sets = sets_of(report)
+    runs: list[Trajectory] = []
+    experiments: list[dict[str, Any]] = []
+    while plant is not None and rediagnose is not None and sets and len(runs) < MAX_EXPERIMENTS:
+        # an amplitude set's scale: its own, else the next above every scale run so far (a wider swing tells a
+        # sine from its cubic, too); a set of another kind (a speed range) is not run
+        last = max((e["input_scale"] for e in experiments), default=1.0)
+        todo = [(a, a.to_separate["input_scale"] or next((s for s in INPUT_SCALES if s > last), None))
+                for a in sets if a.to_separate["quantity"] == "amplitude"]
+        todo = [(a, scale) for a, scale in todo if scale is not None and scale > last]
+        if not todo:
+            break
+        a, scale = todo[0]
+        run = run_experiment(plant, records[0], report.model_before, scale, parameters=parameters, noise=noise)
+        runs.append(run)
+        experiments.append({"effects": list(a.effects), "input_scale": scale, "signal": a.to_separate["signal"],
+                            "swing": float(np.ptp(run[a.to_separate["signal"]])) / 2, "samples": len(run)})
+        report = rediagnose([*records, *runs])
+        sets = sets_of(report)
+    return replace(report, ambiguous=tuple(sets), experiments=tuple(experiments), message=_said(report.message, sets))
