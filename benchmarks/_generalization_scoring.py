@@ -126,7 +126,10 @@ def claims(spec: dict, effects: list[dict], ambiguous: list[dict] | None) -> dic
     named = [e["name"] for e in effects]
     sets = [list(a.get("effects", [])) for a in (ambiguous or [])]
     # a set's "spring" is the linear model's spring to ground and constant: the truth of a record without effects
-    held = names | ({"spring"} if not truth else set())
+    # and of a plant with a spring to ground (a single mass's k; a two-mass plant's k couples the two)
+    plant = spec.get("plant") or {}
+    grounded = plant.get("kind") in ("single", "mass") and float(plant.get("k", 0.0)) > 0.0
+    held = names | ({"spring"} if not truth or grounded else set())
     holding = [s for s in sets if len(s) <= 2 and held & set(s)]
     covered = {n for s in holding for n in s}
     out: dict[str, Any] = {"named": named, "ambiguous_sets": sets, "ambiguous": bool(sets)}

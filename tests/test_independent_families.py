@@ -152,6 +152,12 @@ def test_the_scoring_counts_an_ambiguity_set_apart_and_a_shown_offset_as_no_fals
     # the linear model's spring is the truth of a record without effects: a gravity-or-spring set holds it
     spring = scoring.claims({"effects": []}, [], [{"effects": ["gravity", "spring"], "attached_to": "x"}])
     assert not spring["false_claim"] and spring["right_ambiguous"] and not spring["right_first"]
+    duffing = {"effects": [{"name": "cubic_stiffness", "at": "x"}], "plant": {"kind": "mass", "k": 0.5}}
+    assert not scoring.claims(duffing, [{"name": "cubic_stiffness"}], [{"effects": ["gravity", "spring"]}])[
+        "false_claim"]
+    pendulum = {**duffing, "plant": {"kind": "pendulum", "k": 0.0}}
+    assert scoring.claims(pendulum, [{"name": "cubic_stiffness"}], [{"effects": ["gravity", "spring"]}])[
+        "false_claim"]
     one_way = {"effects": [{"name": "coulomb_friction", "at": "v", "shows_as": "offset"}]}
     out = scoring.claims(one_way, [{"name": "offset"}], [])
     assert out["right_first"] and not out["false_claim"]

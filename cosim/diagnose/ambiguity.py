@@ -6,6 +6,8 @@ linearisation holds, another reading of the same data: the linear model with a s
 with gravity in its place fit alike. The search then names nothing, and that is right as far as it goes; but
 "no effect" hides a question these data cannot answer. :func:`linearisation_ambiguities` asks it:
 
+0. could the search try the effect on this record at all? (its span rule on the model's free run: gravity wants
+   half a radian of range; where it could, the search judged, and there is no set);
 1. does the record show the restoring force at all? (the model without the spring to ground, refitted, is
    worse by more than the margin; a coupling to another position, ``c_q q + c_p p``, is kept as the twist
    ``c_q (q - p)``, and only ``(c_q + c_p) p`` goes to ground);
@@ -80,7 +82,7 @@ class Ambiguity:
     effects : tuple of str
         The readings' names: the effect and what stands for it in the model (``("gravity", "spring")``).
     attached_to : str
-        The signal the effect acts on in its best reading.
+        The signal the effect acts on in the reading reported: the first of `places`.
     readings : tuple of str
         Each reading in words.
     delta_bic : float
@@ -209,12 +211,18 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
         readings = []
         for a in effect.attachments(roles):
             position = a.signals[0]
-            if (name, a.label) in found or position not in model.terms:
-                continue
+            if position not in model.terms or any(position in at.split("-") for _, at in found):
+                continue  # (an effect named on the position accounts for its bend: gravity's would need both)
             fitted = fitted or _fit(model, cols, dt, levels, measured)
             if fitted is None:
                 return out
             base = fitted[0]
+            if effect.span is not None:
+                run = _free_run(base, np.column_stack([cols[u] for u in base.inputs]), dt)
+                shown = run is None or effect.span(run[:, base.states.index(position)], RecordBand.of(
+                    dict(zip(base.states, run.T, strict=True)), dt, levels), a.label) is not None
+                if shown:
+                    continue  # (the search could try it here, and judged: the data told them apart)
             rows = [model.states.index(r) for r in a.rows if base.coef[model.states.index(r),
                                                                        base.terms.index(position)] != 0.0]
             free = _fit(_reading(base, roles, position, rows, None, cols), cols, dt, levels, measured)
@@ -232,8 +240,10 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
             continue
         # the best reading's place, and every place within the margin of it (on a stiff coupling the data
         # cannot tell the two ends apart either: listed in the model's order, not picked by rounding)
-        delta, label, position, other = min(readings, key=lambda r: r[0])
-        places = [r[1] for r in readings if r[0] - delta <= margin]
+        best = min(r[0] for r in readings)
+        near = [r for r in readings if r[0] - best <= margin]
+        delta, label, position, other = near[0]  # (the first of them: not the one rounding favours)
+        places = [r[1] for r in near]
         def searchable(run: dict[str, np.ndarray], span=effect.span, label: str = label,
                        position: str = position) -> bool:
             return span is None or span(run[position], RecordBand.of(run, dt, levels), label) is not None
