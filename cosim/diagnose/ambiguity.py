@@ -19,9 +19,10 @@ with gravity in its place fit alike. The search then names nothing, and that is 
    (RMS, in some state) and the search could try the effect on it (its span rule), and the swing that input
    reaches. Readings alike under every scale tried are left out: one model for every use the data serve.
 
-:func:`rival_ambiguities` adds the other kind: a named effect whose round had another effect's trial fit within
-the margin (a sine and its cubic over a swing of a third of a radian); the record that would separate them is a
-wider range of the signal they act on.
+:func:`rival_ambiguities` adds the other kind: a named effect whose round had another effect's fit within the
+margin (:func:`converged_rival`: the trial fits' near one fitted to convergence as the accepted one is; a sine
+and its cubic over a swing of a third of a radian); the record that would separate them is a wider range of the
+signal they act on.
 
 :func:`run_experiment` runs that input on an FMU of the plant (``cosim diagnose --plant``) and returns the record
 a second diagnosis takes beside the first, with measurement noise at the level the first record shows
@@ -54,6 +55,7 @@ from ..errors import DataError
 from ..identify.model import IdentifiedModel
 from ._free_run import noise_level
 from ._record_band import RecordBand
+from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport
 from .effects import EFFECTS, Roles
 from .screening import output_error_fit
@@ -329,27 +331,41 @@ QUANTITY = {"position": "amplitude", "pair": "amplitude", "position_or_pair": "a
             "input": "input amplitude", "none": "amplitude"}
 
 
+def converged_rival(best: Any, trials: Sequence[Any], margin: float,
+                    fit_with: Callable[[Any], Any]) -> EffectCandidate | None:
+    """The best-scoring other effect among a round's trial fits (`trials`, a few iterations each) that came
+    within `margin` of the accepted one's, fitted to convergence as the accepted `best` was (`fit_with`), if it
+    is significant and still within the margin of it; else None."""
+    mine = next((t for t in trials if (t.candidate.name, t.candidate.attached_to) ==
+                 (best.candidate.name, best.candidate.attached_to)), best)
+    near = [t for t in trials if t.candidate.name != best.candidate.name
+            and t.candidate.delta_bic - min(mine.candidate.delta_bic, best.candidate.delta_bic) <= margin]
+    if not near:
+        return None
+    rival = fit_with(min(near, key=lambda t: (t.candidate.delta_bic, t.candidate.name)))
+    if rival is None or not rival.candidate.significant:
+        return None
+    return rival.candidate if abs(rival.candidate.delta_bic - best.candidate.delta_bic) <= margin else None
+
+
 def rival_ambiguities(report: DiagnosisReport, margin: float) -> list[Ambiguity]:
-    """Each named effect whose round had another effect's trial fit within `margin` of its own (BIC): the two
-    readings, and the kind of record that would separate them (a wider range of the signal it attaches to)."""
+    """Each named effect with a rival (:attr:`DiagnosisReport.rivals`: another effect whose converged fit came
+    within `margin` of its own): the two readings, and the kind of record that would separate them (a wider
+    range of the signal it attaches to)."""
     out = []
-    for e in report.effects:
-        for trials in report.trials:
-            mine = next((c for c in trials if (c.name, c.attached_to) == (e.name, e.attached_to)), None)
-            rivals = [c for c in trials if mine is not None and c.significant and c.name != e.name
-                      and abs(c.delta_bic - mine.delta_bic) <= margin]
-            if not rivals:
-                continue
-            r = min(rivals, key=lambda c: (c.delta_bic, c.name))
-            signal = e.attached_to.split("-")[0]
-            now = (float(np.ptp(report.data[signal])) / 2 if report.data is not None and signal in report.data.names
-                   else None)
-            kind = QUANTITY.get(EFFECTS[e.name].attaches_to, "amplitude") if e.name in EFFECTS else "amplitude"
-            out.append(Ambiguity((e.name, r.name), e.attached_to, (f"{e.name} on {e.attached_to}",
-                                 f"{r.name} on {r.attached_to}"), float(r.delta_bic - mine.delta_bic), float(margin),
-                                 {"quantity": kind, "signal": signal, "at_least": None, "now": now,
-                                  "input_scale": None}, (), tuple(dict.fromkeys((e.attached_to, r.attached_to)))))
-            break
+    named = {(e.name, e.attached_to): e for e in report.effects}
+    for first, r in report.rivals:
+        e = named.get((first.name, first.attached_to))
+        if e is None:
+            continue  # (dropped in a later round)
+        signal = e.attached_to.split("-")[0]
+        now = (float(np.ptp(report.data[signal])) / 2 if report.data is not None and signal in report.data.names
+               else None)
+        kind = QUANTITY.get(EFFECTS[e.name].attaches_to, "amplitude") if e.name in EFFECTS else "amplitude"
+        out.append(Ambiguity((e.name, r.name), e.attached_to, (f"{e.name} on {e.attached_to}",
+                             f"{r.name} on {r.attached_to}"), float(r.delta_bic - first.delta_bic), float(margin),
+                             {"quantity": kind, "signal": signal, "at_least": None, "now": now, "input_scale": None},
+                             (), tuple(dict.fromkeys((e.attached_to, r.attached_to)))))
     return out
 
 

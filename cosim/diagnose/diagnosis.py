@@ -94,7 +94,7 @@ from ._trials import (
     _retest_base,
     _sigma,
 )
-from .ambiguity import check_plant, settled
+from .ambiguity import check_plant, converged_rival, settled
 from .candidates import EffectCandidate, registered
 from .diagnosis_report import DiagnosisReport, _figures, _message
 from .effects import EFFECTS, Effect, effect_names
@@ -308,7 +308,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     check = HeldOutCheck(columns, starts, first.dt, sigma, fit.estimate_x0, fit.measured) if held_out else None
     if check is not None and not check.possible:
         check = None
-    accepted, rounds, fitted, steps, rejected, dropped = [], [], [], [], [], []
+    accepted, rounds, fitted, steps, rejected, dropped, rivals = [], [], [], [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
@@ -354,6 +354,9 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             break
         if best is None:
             break
+        rival = converged_rival(best, trials, bic_margin, lambda t, base=current, nus=nuisances, sc=screen: _fit_with(
+            t.start or base, t.candidate, columns, dt, nus, sc, alpha, bic_margin, min_size, fit))
+        rivals += [(best.candidate, rival)] if rival is not None else []
         accepted.append(best.candidate)
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
@@ -430,7 +433,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            trials=tuple(fitted), steps=tuple(steps),
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
-                           rejected=tuple(rejected), dropped_terms=tuple(dropped),
+                           rejected=tuple(rejected), dropped_terms=tuple(dropped), rivals=tuple(rivals),
                            analysis={"decimation": factor, "dt": dt, "record_dt": given[0].dt})
 
 

@@ -76,6 +76,9 @@ class DiagnosisReport:
     ambiguous : tuple of Ambiguity
         Readings these data cannot tell apart (gravity or a spring to ground over small swings), each with the
         experiment that would (:mod:`~cosim.diagnose.ambiguity`).
+    rivals : tuple of (EffectCandidate, EffectCandidate)
+        Each accepted effect and another effect whose fit, to convergence as the accepted one's, came within
+        the BIC margin of it in that round (the source of the rival sets in `ambiguous`).
     experiments : tuple of dict
         Experiments run on a plant (``plant=``) to settle an ambiguity: ``effects``, ``input_scale``,
         ``signal``, ``swing`` (half its range in the run), ``samples``; their records were diagnosed beside the
@@ -99,6 +102,7 @@ class DiagnosisReport:
     dropped_terms: tuple[str, ...] = ()
     analysis: dict[str, Any] = field(default_factory=dict)
     ambiguous: tuple[Ambiguity, ...] = ()
+    rivals: tuple[tuple[EffectCandidate, EffectCandidate], ...] = ()
     experiments: tuple[dict[str, Any], ...] = ()
 
     @property
