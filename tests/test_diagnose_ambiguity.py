@@ -58,7 +58,8 @@ def test_small_swings_of_a_pendulum_are_the_gravity_or_spring_set(tmp_path):
     t, u = _input(3, 0.06)
     swing = float(np.max(np.abs(_run(t, u, spring=False)[0])))
     assert 0.05 < swing < 0.2  # where sin x is x within the noise
-    payload = _diagnose(_csv(tmp_path / "small.csv", size=0.06))
+    html = tmp_path / "diagnosis.html"
+    payload = _diagnose(_csv(tmp_path / "small.csv", size=0.06), "--report", str(html))
     assert payload["effects"] == [], payload["message"]
     sets = payload["ambiguous"]
     assert [s["effects"] for s in sets] == [["gravity", "spring"]], payload["message"]
@@ -68,6 +69,7 @@ def test_small_swings_of_a_pendulum_are_the_gravity_or_spring_set(tmp_path):
     assert plan["quantity"] == "amplitude" and plan["signal"] == "x" and plan["input_scale"] in INPUT_SCALES
     assert plan["at_least"] > 1.5 * plan["now"]
     assert payload["to_separate"] == [{"effects": ["gravity", "spring"], **plan}]
+    assert "Cannot tell apart" in html.read_text(encoding="utf-8")  # the report's page says it too
     # the swing promised is the one the plant itself reaches under that input (the gravity reading's free run)
     reached = float(np.ptp(_run(t, u * plan["input_scale"], spring=False)[0])) / 2
     assert plan["at_least"] == pytest.approx(reached, rel=0.15)

@@ -215,16 +215,15 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
             position = a.signals[0]
             if position not in model.terms or any(position in at.split("-") for _, at in found):
                 continue  # (an effect named on the position accounts for its bend: gravity's would need both)
+            if effect.span is not None:  # (on the model's free run: no fit needed to know)
+                run = _free_run(model, np.column_stack([cols[u] for u in model.inputs]), dt, cols)
+                if run is None or effect.span(run[:, model.states.index(position)], RecordBand.of(
+                        dict(zip(model.states, run.T, strict=True)), dt, levels), a.label) is not None:
+                    continue  # (the search could try it here, and judged: the data told them apart)
             fitted = fitted or _fit(model, cols, dt, levels, measured)
             if fitted is None:
                 return out
             base = fitted[0]
-            if effect.span is not None:
-                run = _free_run(base, np.column_stack([cols[u] for u in base.inputs]), dt)
-                shown = run is None or effect.span(run[:, base.states.index(position)], RecordBand.of(
-                    dict(zip(base.states, run.T, strict=True)), dt, levels), a.label) is not None
-                if shown:
-                    continue  # (the search could try it here, and judged: the data told them apart)
             rows = [model.states.index(r) for r in a.rows if base.coef[model.states.index(r),
                                                                        base.terms.index(position)] != 0.0]
             free = _fit(_reading(base, roles, position, rows, None, cols), cols, dt, levels, measured)
@@ -258,8 +257,12 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
     return out
 
 
-def _free_run(model: IdentifiedModel, U: np.ndarray, dt: float) -> np.ndarray | None:
-    x0 = np.asarray(model.meta["x0"], dtype=float).reshape(-1, len(model.states))[0]
+def _free_run(model: IdentifiedModel, U: np.ndarray, dt: float,
+              cols: Mapping[str, np.ndarray] | None = None) -> np.ndarray | None:
+    """The model's free run from its fitted initial state (else the record's first sample, from `cols`)."""
+    meta = model.meta if isinstance(model.meta, Mapping) else {}
+    x0 = (np.asarray(meta["x0"], dtype=float).reshape(-1, len(model.states))[0] if "x0" in meta
+          else np.array([cols[s][0] for s in model.states]))
     sim = model.simulate(x0, U[:-1], dt=dt)
     return sim.states if sim.ok else None
 
