@@ -46,6 +46,7 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -57,7 +58,7 @@ from ._free_run import noise_level
 from ._record_band import RecordBand
 from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport
-from .effects import EFFECTS, Roles
+from .effects import EFFECTS, Effect, Roles
 from .screening import output_error_fit
 
 __all__ = ["Ambiguity", "check_plant", "linearisation_ambiguities", "rival_ambiguities", "run_experiment",
@@ -204,7 +205,7 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
     dt = float(record.dt)
     levels = {s: float(noise[s]) if noise and s in noise else noise_level(cols[s]) for s in model.states}
     n_obs = len(record) * len(measured if measured is not None else model.states)
-    fitted = None
+    fitted = run = None
     out = []
     for name in names:
         effect = EFFECTS.get(name)
@@ -215,10 +216,11 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
             position = a.signals[0]
             if position not in model.terms or any(position in at.split("-") for _, at in found):
                 continue  # (an effect named on the position accounts for its bend: gravity's would need both)
-            if effect.span is not None:  # (on the model's free run: no fit needed to know)
-                run = _free_run(model, np.column_stack([cols[u] for u in model.inputs]), dt, cols)
-                if run is None or effect.span(run[:, model.states.index(position)], RecordBand.of(
-                        dict(zip(model.states, run.T, strict=True)), dt, levels), a.label) is not None:
+            if effect.span is not None:
+                if run is None:  # (the model's own free run, once: what the search's span rules read)
+                    run = _simulated(model, np.column_stack([cols[u] for u in model.inputs]), dt, cols)
+                    run = {} if run is None else dict(zip(model.states, run.T, strict=True))
+                if not run or _searchable(effect, a.label, position, run, dt, levels):
                     continue  # (the search could try it here, and judged: the data told them apart)
             fitted = fitted or _fit(model, cols, dt, levels, measured)
             if fitted is None:
@@ -245,10 +247,8 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
         near = [r for r in readings if r[0] - best <= margin]
         delta, label, position, other = near[0]  # (the first of them: not the one rounding favours)
         places = [r[1] for r in near]
-        def searchable(run: dict[str, np.ndarray], span=effect.span, label: str = label,
-                       position: str = position) -> bool:
-            return span is None or span(run[position], RecordBand.of(run, dt, levels), label) is not None
-        experiment = separating_experiment(fitted[0], other, cols, dt, levels, position, searchable)
+        experiment = separating_experiment(fitted[0], other, cols, dt, levels, position,
+                                           partial(_searchable, effect, label, position, dt=dt, noise=levels))
         if experiment["input_scale"] is None:
             continue  # (alike under every input up to 20x the record's: one model for every use the data serve)
         out.append(Ambiguity((name, "spring"), label, (f"{name} on {' or '.join(places)}",
@@ -257,7 +257,14 @@ def linearisation_ambiguities(model: IdentifiedModel, record: Trajectory, names:
     return out
 
 
-def _free_run(model: IdentifiedModel, U: np.ndarray, dt: float,
+def _searchable(effect: Effect, label: str, position: str, run: Mapping[str, np.ndarray], dt: float,
+                noise: Mapping[str, float]) -> bool:
+    """Whether the search could try `effect` at `position` on a record like `run` (its span rule; an effect
+    without one: always)."""
+    return effect.span is None or effect.span(run[position], RecordBand.of(run, dt, noise), label) is not None
+
+
+def _simulated(model: IdentifiedModel, U: np.ndarray, dt: float,
               cols: Mapping[str, np.ndarray] | None = None) -> np.ndarray | None:
     """The model's free run from its fitted initial state (else the record's first sample, from `cols`)."""
     meta = model.meta if isinstance(model.meta, Mapping) else {}
@@ -279,7 +286,7 @@ def separating_experiment(first: IdentifiedModel, second: IdentifiedModel, cols:
     sigma = np.array([noise[s] for s in first.states])
     now = float(np.ptp(cols[signal])) / 2
     for scale in INPUT_SCALES:
-        a, b = _free_run(first, U * scale, dt), _free_run(second, U * scale, dt)
+        a, b = _simulated(first, U * scale, dt), _simulated(second, U * scale, dt)
         if a is None or b is None:
             break  # (a reading diverging is no experiment to run on a plant)
         apart = float(np.max(np.sqrt(np.mean((a - b) ** 2, axis=0)) / sigma)) >= SEPARATION
