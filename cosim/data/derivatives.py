@@ -110,12 +110,30 @@ def savgol_window(x: Sequence[float] | np.ndarray, dt: float, *, polyorder: int 
     best, best_mse = shortest, math.inf
     for window in candidates:
         c = savgol_coeffs(int(window), polyorder, deriv=deriv, delta=dt, use="dot")
-        lags = np.arange(window) - window // 2
-        response = np.exp(2j * np.pi * dt * np.outer(freq, lags)) @ c
+        response = _response(c, freq, dt, df)
         mse = float(np.sum(np.abs(response - ideal) ** 2 * density) * df) + sigma2 * float(c @ c)
         if mse < best_mse:
             best, best_mse = int(window), mse
     return best
+
+
+def _response(c: np.ndarray, freq: np.ndarray, dt: float, df: float) -> np.ndarray:
+    """The frequency response ``sum_l c_l exp(2 pi i f dt l)`` of the centred filter `c` (lags ``-w//2 ... w//2``)
+    at `freq`.
+
+    The spectrum's bins are whole multiples of ``df = 1 / (m dt)``: there the response is a length-``m`` FFT of
+    the filter folded modulo ``m`` (exact, ``m log m`` a window). Forming ``exp(2 pi i f dt l)`` for every bin and
+    lag took ``bins x window`` complex exponentials: 5 s a signal of 25 k samples (EMPS), 80 windows up to half
+    the record. Bins on no such grid take that direct sum.
+    """
+    lags = np.arange(c.size) - c.size // 2
+    m = round(1.0 / (df * dt)) if df > 0 else 0
+    bins = freq / df if df > 0 else freq
+    whole = np.rint(bins)
+    if m < 2 or abs(m * df * dt - 1.0) > 1e-9 or not np.allclose(bins, whole, rtol=0.0, atol=1e-6):
+        return np.exp(2j * np.pi * dt * np.outer(freq, lags)) @ c
+    folded = np.bincount(lags % m, weights=c, minlength=m)
+    return m * np.fft.ifft(folded)[whole.astype(int) % m]
 
 
 def _savgol_windows(x: np.ndarray, dt: float, order: int, window: Any, polyorder: int) -> tuple[int, ...]:
