@@ -61,11 +61,6 @@ from .effects import EFFECTS, Roles
 #: Samples of each record the start is identified on (their first): it is only a start, refined on the whole
 #: record by the trial fit. The benchmark's records of up to 4000 samples are used whole.
 JOINT_SAMPLES = 4000
-#: The continuation prior of :func:`identified_start`'s multi-start: its two starts are refined with it only, not
-#: also without it as the identification does by default. It is a start, refined again by the trial fit: on the
-#: 15 of the generalisation benchmark's records 0-39 and 200-241 where it ran (4000 samples) the effects, sets and
-#: parameters came out the same (1e-9), its time 110 -> 61 s in all (record 21: 34.6 -> 21.0 s a diagnosis).
-IDENTIFIED_PRIOR = 0.1
 
 
 def has_joint_start(name: str) -> bool:
@@ -123,8 +118,7 @@ def state_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mappin
 def identified_start(current: IdentifiedModel, cand: EffectCandidate, columns: Mapping[str, np.ndarray],
                      dt: float, segments: list[int] | None) -> tuple[IdentifiedModel, EffectCandidate] | None:
     """The base identified again with an effect on states, `cand`'s terms in the library beside the linear
-    ones (the default identification: output-error multi-start, exact sensitivities; its starts refined with
-    the continuation prior only, :data:`IDENTIFIED_PRIOR`), on the first
+    ones (the default identification: output-error multi-start, exact sensitivities), on the first
     :data:`JOINT_SAMPLES` of each record; the start's base part and the candidate with its coefficients in every
     dynamic row. None when the current model is not linear, the effect is not on states or the fit fails.
 
@@ -147,8 +141,7 @@ def identified_start(current: IdentifiedModel, cand: EffectCandidate, columns: M
             warnings.simplefilter("ignore")
             fitted = SINDYc(library="linear", include_constant="1" in current.terms, threshold=0.0,
                             kinematics=dict(roles.velocity_of) or "none", refine="output_error",
-                            refine_options={"prior": IDENTIFIED_PRIOR}, allow_unstable=True, prefer_stable=True,
-                            decimate=1, terms=list(terms)).fit(
+                            allow_unstable=True, prefer_stable=True, decimate=1, terms=list(terms)).fit(
                 records, states=list(current.states), inputs=list(current.inputs)).model_
     except (CosimError, np.linalg.LinAlgError, FloatingPointError, ValueError):
         return None
