@@ -123,7 +123,7 @@ def _response(c: np.ndarray, freq: np.ndarray, dt: float, df: float) -> np.ndarr
 
     The spectrum's bins are whole multiples of ``df = 1 / (m dt)``: there the response is a length-``m`` FFT of
     the filter folded modulo ``m`` (exact, ``m log m`` a window). Forming ``exp(2 pi i f dt l)`` for every bin and
-    lag took ``bins x window`` complex exponentials: 5 s a signal of 25 k samples (EMPS), 80 windows up to half
+    lag took ``bins x window`` complex exponentials: 7.4 s a signal of 25 k samples (EMPS), 80 windows up to half
     the record. Bins on no such grid take that direct sum.
     """
     lags = np.arange(c.size) - c.size // 2

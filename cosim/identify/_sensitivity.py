@@ -64,7 +64,7 @@ def free_run_sensitivities(model: IdentifiedModel, coef: np.ndarray, support: np
     return z[:, :n], z[:, n:].reshape(len(z), q, n).transpose(0, 2, 1)
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=64)  # a compiled structure holds its interpreted one too
 def _sensitivity_chunk(n: int, m: int, sources: tuple[str, ...], n_numbers: int, n_terms: int,
                        support_bytes: bytes, jit: bool = False):
     """The chunked run of the state and its sensitivities for one model structure and support (cached).
