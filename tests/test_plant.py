@@ -356,3 +356,21 @@ def test_any_float_variable_can_be_recorded_not_only_outputs(fmu):
     assert simulate(fmu, duration=0.01, dt=1e-3).names == ("theta_m", "omega_m", "theta_L", "omega_L")
     with pytest.raises(UnknownVariableError, match="has no variable named 'der_omega_x'"):
         FmuPlant(fmu, dt=1e-3, outputs=["der_omega_x"])
+
+
+def test_plants_opened_at_once_in_threads_leave_the_working_directory_alone(fmu, tmp_path, monkeypatch):
+    # FMPy loads a library with os.chdir there and back; unserialised, plants loading at once in a Dask worker's
+    # threads left the process in another plant's deleted temporary folder (the README's Monte Carlo on a
+    # threaded worker failed 39 of 50 cases, and the next command could not find its files)
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.chdir(tmp_path)
+
+    def run(k: int) -> float:
+        with FmuPlant(fmu, dt=1e-3, parameters={"Fc": 0.0}, instance_name=f"p{k}") as plant:
+            return float(plant.step([100.0 + k, 0.0])[1])
+
+    with ThreadPoolExecutor(max_workers=16) as pool:
+        speeds = list(pool.map(run, range(80)))
+    assert Path.cwd() == tmp_path
+    assert speeds == [run(k) for k in range(80)]  # every plant loaded and stepped as it does alone

@@ -84,7 +84,7 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster, monkeypatch):
         # cosim 18 times: CI time); tests/test_cli.py checks the entry point itself
         result = CliRunner().invoke(main, args, catch_exceptions=False)
         line = " ".join(argv)
-        assert result.exit_code == 0, f"{line}\n{result.stderr[-2000:]}"
+        assert result.exit_code == 0, f"{line}\n{result.stdout[-2000:]}\n{result.stderr[-2000:]}"
         assert "Traceback" not in result.stderr and "UserWarning" not in result.stderr, line
         for name in written(argv):
             assert (tmp_path / name).exists(), f"{line} did not write {name}"

@@ -37,6 +37,7 @@ import logging
 import math
 import os
 import shutil
+import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,11 @@ from .model_exchange import ModelExchangeSlave
 __all__ = ["FmuPlant"]
 
 _log = logging.getLogger("cosim.fmu")
+# FMPy loads an FMU's library with os.chdir into its binaries folder and back (fmpy.fmi1._FMU.__init__, for
+# Windows' dependent DLLs), and the directory is the process's: two plants loading at once in threads of one
+# process (a Dask worker's, a thread pool's) left it in the other's temporary folder, deleted when that plant
+# closed, and every relative path failed after ("No such file or directory"). Loads take this lock in turn.
+_LIBRARY_LOAD = threading.Lock()
 
 
 class FmuPlant(_Stepping):
@@ -133,7 +139,7 @@ class FmuPlant(_Stepping):
         solver: str = "cvode",
         relative_tolerance: float | None = None,
     ) -> None:
-        self.path = Path(fmu)
+        self.path = Path(fmu).absolute()  # FMPy changes the process's directory while it loads a library (below)
         self._fmu = None
         self._unzipdir: str | None = None
         self._initialized = False
@@ -321,14 +327,8 @@ class FmuPlant(_Stepping):
         common = dict(guid=md.guid, unzipDirectory=self._unzipdir,
                       modelIdentifier=interface.modelIdentifier, instanceName=instance_name)
         try:
-            if self.kind == "me":  # integrated here by FMPy's solvers, stepped like a co-simulation slave
-                self._fmu = ModelExchangeSlave(**common, fmi_version=self.fmi_version, model_description=md,
-                                               solver=self.solver, relative_tolerance=self._relative_tolerance,
-                                               log=self._on_log)
-            elif self.fmi_version == "2.0":
-                self._fmu = fmpy.fmi2.FMU2Slave(**common)
-            else:
-                self._fmu = fmpy.fmi3.FMU3Slave(**common)
+            with _LIBRARY_LOAD:
+                self._fmu = self._open(fmpy, common)
         except Exception as exc:
             raise FmuPlatformError(f"{self.path.name}: its binary cannot be loaded on this machine "
                                    f"({str(exc).splitlines()[0]}); re-export it for this platform") from None
@@ -347,6 +347,16 @@ class FmuPlant(_Stepping):
             self._fmu_error("fmi2Instantiate" if self.fmi_version == "2.0" else "fmi3Instantiate" +
                             ("CoSimulation" if self.kind == "cs" else "ModelExchange"), exc)
         self._bind_hot_path()
+
+    def _open(self, fmpy: Any, common: dict[str, Any]) -> Any:
+        """FMPy's instance of the FMU (library loaded, not instantiated); called under ``_LIBRARY_LOAD``."""
+        if self.kind == "me":  # integrated here by FMPy's solvers, stepped like a co-simulation slave
+            return ModelExchangeSlave(**common, fmi_version=self.fmi_version, model_description=self.model_description,
+                                      solver=self.solver, relative_tolerance=self._relative_tolerance,
+                                      log=self._on_log)
+        if self.fmi_version == "2.0":
+            return fmpy.fmi2.FMU2Slave(**common)
+        return fmpy.fmi3.FMU3Slave(**common)
 
     def _fmu_error(self, function: str, exc: Exception, status: int = 3) -> None:
         function = getattr(exc, "function", None) or function
