@@ -19,7 +19,8 @@ sees the clipped or dead-zoned command, the record writes the command); ``sqrt_o
 ``hard_stop`` (a level that cannot pass ``bound``: at the bound a rising derivative is set to 0, the excess
 spills; its quantity is the derivative removed).
 
-Integrators: ``lsoda`` (every sample interval on its own, the input held, ``solve_ivp(LSODA)``, as
+Integrators: ``lsoda`` (every sample interval on its own, the input held, ``solve_ivp(LSODA)``'s bits by
+``_held_lsoda``, as
 independent_plants.simulate) or ``euler`` (forward Euler with ``substeps`` equal steps per sample interval, as
 an FMU's fixed-step solver gives a record).
 
@@ -37,6 +38,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from _held_lsoda import lsoda_interval
 from scipy.integrate import solve_ivp
 
 NAMES = {"mass": ("x", "v", "u"), "pendulum": ("theta", "omega", "tau"), "tanks": ("h1", "h2", "u")}
@@ -178,10 +180,11 @@ def _lsoda_step(system: System, y: np.ndarray, u: float, t0: float, t1: float,
                  and not (linear and i in linear)), None)
     opts = {"method": "LSODA", "rtol": rtol, "atol": atol, "max_step": t1 - t0, "min_step": 1e-10 * (t1 - t0)}
     if stop is None:
-        sol = solve_ivp(lambda t, s: derivative(system, s, u, linear)[0], (t0, t1), y, **opts)
-        if not sol.success:
-            raise RuntimeError(f"integration failed at t={t0:.4g}: {sol.message}")
-        return sol.y[:, -1].copy()
+        try:
+            return lsoda_interval(lambda t, s: derivative(system, s, u, linear)[0], t0, t1, y,
+                                  **{k: v for k, v in opts.items() if k != "method"})
+        except RuntimeError as exc:
+            raise RuntimeError(f"integration failed at t={t0:.4g}: {exc}") from None
     r = system.states.index(stop[1]["at"])
     bound = stop[1]["params"]["bound"]
     t = t0

@@ -14,6 +14,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # benchmarks/ is not a package
 import independent_plants as ip  # noqa: E402
+from _held_lsoda import lsoda_interval  # noqa: E402
 
 
 def test_single_mass_matches_the_analytic_solution():
@@ -26,6 +27,29 @@ def test_single_mass_matches_the_analytic_solution():
     assert np.allclose(cmd, force)
     assert np.allclose(states[:, 1], v, rtol=1e-5, atol=1e-8)
     assert np.allclose(states[:, 0], x, rtol=1e-5, atol=1e-8)
+
+
+@pytest.mark.parametrize("effects", [[], [{"name": "coulomb_friction", "row": "omega_m",
+                                           "params": {"Fc": 2.0, "eps": 1e-4}},
+                                          {"name": "backlash", "params": {"half_width": 1e-3}}]])
+def test_an_interval_by_the_reused_lsoda_is_solve_ivps_to_the_last_bit(effects):
+    """The simulators integrate every sample interval by :func:`_held_lsoda.lsoda_interval`, a reused LSODA:
+    the records must be those solve_ivp gave (records 0-199 are kept as they were)."""
+    from scipy.integrate import solve_ivp
+
+    plant = ip.Plant("two_mass", {"Jm": 0.01, "JL": 0.05, "k": 80.0, "c": 0.02, "bm": 0.01, "bL": 0.05})
+    f = ip._rhs(plant, effects)
+    rng = np.random.default_rng(7)
+    y = y_ref = np.zeros(4)
+    for k in range(150):
+        u, a, b = float(rng.normal(0, 5)), k * 1e-3, (k + 1) * 1e-3
+        b = a + 0.37e-3 if k % 50 == 49 else b  # a delay's split interval
+        y = lsoda_interval(lambda t, s, u=u: f(t, s, u), a, b, y, rtol=1e-7, atol=1e-10, max_step=b - a,
+                           min_step=1e-9 * (b - a))
+        y_ref = solve_ivp(f, (a, b), y_ref, method="LSODA", args=(u,), rtol=1e-7, atol=1e-10, max_step=b - a,
+                          min_step=1e-9 * (b - a)).y[:, -1]
+        assert np.array_equal(y, y_ref), k
+    assert np.max(np.abs(y)) > 1e-3  # it moved
 
 
 def test_coulomb_friction_sticks_below_its_force():
