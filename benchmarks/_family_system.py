@@ -20,9 +20,8 @@ sees the clipped or dead-zoned command, the record writes the command); ``sqrt_o
 spills; its quantity is the derivative removed).
 
 Integrators: ``lsoda`` (every sample interval on its own, the input held, ``solve_ivp(LSODA)``'s bits by
-``_held_lsoda``, as
-independent_plants.simulate) or ``euler`` (forward Euler with ``substeps`` equal steps per sample interval, as
-an FMU's fixed-step solver gives a record).
+``_held_lsoda``, as independent_plants.simulate) or ``euler`` (forward Euler with ``substeps`` equal steps per
+sample interval, as an FMU's fixed-step solver gives a record).
 
 Visibility (:func:`visibility`): an effect's non-linear part over the noise. The effect's quantity along the
 noise-free run is fitted by least squares on the states, the input and a constant (what a linear model can

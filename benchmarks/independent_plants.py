@@ -224,8 +224,8 @@ def simulate(plant: Plant, effects: list[dict], dt: float, n: int, *, u: np.ndar
     """States at ``k dt`` (n+1 rows) and the commanded input (n rows, held over each step), open loop (`u`)
     or closed loop (a PID, settings `pid`, on the first position tracking `reference`).
 
-    Each step is integrated on its own by LSODA (``_held_lsoda``, solve_ivp's bits): the input is held, so the right-hand side is
-    smooth inside it; a delay splits a step where the delayed input changes.
+    Each step is integrated on its own by LSODA (``_held_lsoda``, solve_ivp's bits): the input is held, so the
+    right-hand side is smooth inside it; a delay splits a step where the delayed input changes.
     """
     f = _rhs(plant, effects)
     g, delay = _input_map(effects)
