@@ -3,6 +3,7 @@ two-mass simulator (scipy solve_ivp, equations written here)."""
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import numpy as np
@@ -19,6 +20,12 @@ from cosim.identify.sindyc import SINDYc
 def two_mass(fs: float, *, f_res: float, noise: float, seed: int = 0, duration: float = 4.0) -> np.ndarray:
     """theta1, omega1, theta2, omega2 of two inertias, a damped spring between them, driven by a square wave
     and a sine; white noise of `noise` x each signal's range."""
+    x = _noise_free(fs, f_res, seed, duration)
+    return x + noise * np.ptp(x, axis=0) * np.random.default_rng(seed + 1).standard_normal(x.shape)
+
+
+@functools.lru_cache(maxsize=8)  # the grid's three noise levels share one run (most of this file's time)
+def _noise_free(fs: float, f_res: float, seed: int, duration: float) -> np.ndarray:
     rng = np.random.default_rng(seed)
     j1, j2 = 0.02, 0.06
     jr = j1 * j2 / (j1 + j2)
@@ -36,7 +43,8 @@ def two_mass(fs: float, *, f_res: float, noise: float, seed: int = 0, duration: 
 
     t = np.arange(int(round(duration * fs)) + 1) / fs
     x = solve_ivp(rhs, (0, t[-1]), [0.0, 0.0, 0.1, 0.0], t_eval=t, rtol=1e-9, atol=1e-11, max_step=1 / fs).y.T
-    return x + noise * np.ptp(x, axis=0) * np.random.default_rng(seed + 1).standard_normal(x.shape)
+    x.flags.writeable = False  # shared by the cases that use it
+    return x
 
 
 NAMES = ["theta_m", "omega_m", "theta_L", "omega_L"]
