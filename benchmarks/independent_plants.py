@@ -250,8 +250,9 @@ def simulate(plant: Plant, effects: list[dict], dt: float, n: int, *, u: np.ndar
         for a, b, uk in pieces:
             ue = g(uk)
             try:
-                y = lsoda_interval(lambda t, s, ue=ue: f(t, s, ue), a, b, y, rtol=rtol, atol=atol, max_step=b - a,
-                                   min_step=1e-9 * (b - a))
+                # (the state as Python floats: the same arithmetic, without NumPy's per-scalar overhead)
+                y = lsoda_interval(lambda t, s, ue=ue: f(t, s.tolist(), ue), a, b, y, rtol=rtol, atol=atol,
+                                   max_step=b - a, min_step=1e-9 * (b - a))
             except RuntimeError as exc:
                 raise RuntimeError(f"integration failed at t={a:.4g}: {exc}") from None
             if not np.all(np.isfinite(y)) or np.max(np.abs(y)) > 1e9:
