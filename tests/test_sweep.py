@@ -235,3 +235,32 @@ def test_a_dead_worker_costs_only_its_own_case():
     assert sweep.errors[2].type == "BrokenProcessPool"
     assert sweep.errors[2].message.startswith("the worker process died while running this case")
     assert sweep.results[3] == _example_case(level=0.1, seed=3)
+
+
+class _StarvedLoopClient:
+    """Fails as distributed's LoopRunner does when its event-loop thread does not start in 10 s, `fails` times."""
+
+    made = 0
+
+    def __init__(self, scheduler, *, timeout, set_as_default, fails):
+        type(self).made += 1
+        if type(self).made <= fails:
+            assert None is not None  # the same bare assertion distributed.utils.LoopRunner fails on
+        self.scheduler = scheduler
+
+
+@pytest.mark.parametrize("fails, connects", [(2, True), (3, False)])
+def test_a_client_whose_event_loop_did_not_start_is_tried_again(fails, connects):
+    from functools import partial
+
+    from cosim.errors import CosimError
+    from cosim.study._sweep_backends import _client
+
+    _StarvedLoopClient.made = 0
+    starved = partial(_StarvedLoopClient, fails=fails)
+    if connects:
+        assert _client(starved, "tcp://127.0.0.1:8786", 1.0).scheduler == "tcp://127.0.0.1:8786"
+        assert _StarvedLoopClient.made == 3
+    else:
+        with pytest.raises(CosimError, match=r"could not start its event loop in 3 tries of 10 s each"):
+            _client(starved, "tcp://127.0.0.1:8786", 1.0)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
-from ..errors import InvalidSettingError
+from ..errors import CosimError, InvalidSettingError
 from .sweep_result import SweepError, _json_ready
 
 if TYPE_CHECKING:
@@ -179,6 +179,26 @@ def _run_in_processes(func: Callable[..., Any], cases: list[dict[str, Any]], wor
     return outcomes  # type: ignore[return-value]
 
 
+_LOOP_START_ATTEMPTS = 3
+
+
+def _client(client_class: Callable[..., Any], scheduler: str, timeout: float) -> distributed.Client:
+    """``Client(scheduler)``, tried again when Dask's own event-loop thread did not start.
+
+    distributed's ``LoopRunner`` gives the thread that runs a client's event loop a fixed 10 s to start and then
+    fails on a bare ``assert loop is not None``; on a starved machine (a CI runner busy with other work) that
+    happened once in a full test run. The thread has nothing to do with the scheduler's address, so a new client
+    is tried, up to `_LOOP_START_ATTEMPTS` times, before saying so in one line.
+    """
+    for _ in range(_LOOP_START_ATTEMPTS):
+        try:
+            return client_class(scheduler, timeout=timeout, set_as_default=False)
+        except AssertionError:
+            continue
+    raise CosimError(f"Dask's client could not start its event loop in {_LOOP_START_ATTEMPTS} tries of "
+                              "10 s each: this machine is too busy; try again when it is less loaded")
+
+
 def _connect(scheduler: Any, timeout: float) -> tuple[distributed.Client, bool]:
     """A client for `scheduler` and whether this call owns it (and must close it)."""
     distributed = sys.modules.get("distributed")
@@ -197,7 +217,7 @@ def _connect(scheduler: Any, timeout: float) -> tuple[distributed.Client, bool]:
     from distributed import Client
 
     try:
-        return Client(scheduler, timeout=timeout, set_as_default=False), True
+        return _client(Client, scheduler, timeout), True
     except ValueError as exc:  # unknown scheme, malformed address
         raise InvalidSettingError(f"scheduler address {scheduler!r} is not valid ({exc}); expected e.g. "
                                   "'tcp://127.0.0.1:8786'") from None
