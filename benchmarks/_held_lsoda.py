@@ -1,11 +1,11 @@
-"""One sample interval integrated by LSODA, bit for bit what ``solve_ivp(method="LSODA")`` gives, at a third of
+"""One sample interval integrated by LSODA, bit for bit what ``solve_ivp(method="LSODA")`` gives, at about half
 its cost: the independent simulators integrate every sample interval on its own (the input held), thousands
 of intervals per run, and ``solve_ivp`` spent most of that time building a new solver for each.
 
 :func:`lsoda_interval` drives one of SciPy's LSODA integrators (``scipy.integrate._ode.lsoda``, what
 ``solve_ivp``'s ``LSODA`` class drives) through exactly the calls that class makes: reset, the interval's end as
 the critical time, one-step mode (``itask=5``) until the end is reached. Only the solver object is reused.
-The private class is checked on import; where it is missing or changed, the interval goes through
+The private class is checked once, on first use; where it is missing or changed, the interval goes through
 ``solve_ivp`` itself (the same numbers, slower). ``tests/test_independent_plants.py`` checks that the two agree
 to the last bit.
 """
