@@ -196,7 +196,7 @@ def _client(client_class: Callable[..., Any], scheduler: str, timeout: float) ->
         except AssertionError:
             continue
     raise CosimError(f"Dask's client could not start its event loop in {_LOOP_START_ATTEMPTS} tries of "
-                              "10 s each: this machine is too busy; try again when it is less loaded")
+                     "10 s each: this machine is too busy; try again when it is less loaded")
 
 
 def _connect(scheduler: Any, timeout: float) -> tuple[distributed.Client, bool]:
