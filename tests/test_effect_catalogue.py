@@ -115,6 +115,22 @@ def test_coulomb_smoothing_grid_follows_the_speed_range():
         assert len(grid) >= 3 and np.all(np.diff(np.log(grid)) > 0)
 
 
+def test_the_step_from_one_record_into_the_next_is_no_reversal():
+    """Two records, each moving one way from rest, concatenated: the join is no reversal, and the friction's
+    switch is not held as smooth as the motion's speed there."""
+    t = np.arange(2000) * DT
+    one_way = 0.3 * (1.0 - np.exp(-t / 0.2)) * (1.2 + np.sin(2 * np.pi * 0.7 * t))  # never below zero
+    v = np.concatenate([one_way, -one_way[::-1] - 0.01])
+    assert rb.reversal_step(v) == pytest.approx(abs(v[1999] - v[2000]))  # the join, read as a reversal
+    assert np.isnan(rb.reversal_step(v, [0, 2000]))
+    joined = rb.smoothing_span(v, RecordBand.of({"v": v}, DT), "v")
+    apart = rb.smoothing_span(v, RecordBand.of({"v": v}, DT, segments=[0, 2000]), "v")
+    assert joined[0] >= 0.01 and apart[0] == pytest.approx(1e-4 * np.abs(v).max())
+    turning = 0.3 * np.sin(2 * np.pi * t)  # a genuine reversal inside a record still counts
+    both = np.concatenate([turning, turning])
+    assert rb.reversal_step(both, [0, 2000]) == pytest.approx(rb.reversal_step(turning), rel=0.2)
+
+
 @pytest.mark.parametrize(("samples", "longest"), [(300, 6), (4000, 75), (10**6, 185)])
 def test_delay_grid_is_bounded_by_the_record(samples, longest):
     u = np.sin(np.arange(samples) * DT * 7.0)

@@ -67,6 +67,41 @@ def test_the_bound_is_gridded_between_the_median_and_the_extreme_on_its_side():
     assert EFFECTS["sqrt_outflow"].grid(Attachment("h", ("h",), ("h",)), {"h": level + 1.0}) == [None]
 
 
+def test_the_outflow_is_tried_on_a_level_the_plant_kept_non_negative_whatever_the_free_run_does():
+    from cosim.diagnose._record_band import RecordBand
+
+    t = np.linspace(0.0, 1.0, 2000)
+    measured = 0.5 + 0.45 * np.sin(2 * np.pi * 3 * t)  # the plant's level: never below zero
+    free_run = measured - 0.1  # a linear base's free run undershoots: 8 % of it below zero
+    so, place = EFFECTS["sqrt_outflow"], Attachment("h", ("h",), ("h",))
+    assert so.grid(place, {"h": free_run}) == []  # judged on the free run alone: not tried
+    band = RecordBand.of({"h": free_run}, 1e-3, {"h": 1e-3}, measured={"h": measured})
+    assert so.grid(place, {"h": free_run}, band) == [None]
+    band = RecordBand.of({"h": free_run}, 1e-3, {"h": 1e-3}, measured={"h": free_run})
+    assert so.grid(place, {"h": free_run}, band) == []
+
+
+def test_the_bound_may_reach_the_measured_top_where_the_free_run_stops_short():
+    """A level held at its top (1.0) for a tenth of the record, measured with noise: the base's free run (its 97 %
+    quantile) stops short of the top, and the bound's grid reaches the measured top, smoothed (not its noise
+    peaks, some 3.5 noise levels above the hold)."""
+    from cosim.diagnose._record_band import RecordBand
+
+    rng = np.random.default_rng(3)
+    n, held, sigma = 4000, 400, 0.001
+    level = np.concatenate([0.5 + 0.4 * np.sin(np.linspace(0.0, 6 * np.pi, n - held)) ** 2, np.full(held, 1.0)])
+    level[n - held - 400:n - held] = np.linspace(level[n - held - 400], 1.0, 400)  # it fills up to the top
+    measured = level + sigma * rng.standard_normal(n)
+    free_run = 0.97 * level  # the base's free run falls short of the top
+    place = Attachment("h (upper)", ("h",), ("h",))
+    band = RecordBand.of({"h": free_run}, 0.01, {"h": sigma}, measured={"h": measured})
+    grid = EFFECTS["hard_stop"].grid(place, {"h": free_run}, band)
+    assert len(grid) == 6 and max(grid) == pytest.approx(1.0, abs=2 * sigma)
+    assert max(measured) > 1.0 + 2.5 * sigma  # the raw top is a noise peak
+    alone = EFFECTS["hard_stop"].grid(place, {"h": free_run}, RecordBand.of({"h": free_run}, 0.01, {"h": sigma}))
+    assert max(alone) == pytest.approx(float(np.quantile(free_run, 0.97))) and max(alone) < 0.98
+
+
 def test_overflow_is_another_name_for_hard_stop():
     assert effect_selection("overflow").names == ("hard_stop",)
     assert effect_selection("overflow:bound=2").fixed == {"hard_stop": 2.0}

@@ -212,24 +212,10 @@ def check_effect_selection(selection: str | Sequence[str] | EffectSelection, mod
         return parsed
     levels = {s: float(noise[s]) if noise and s in noise else noise_level(np.asarray(columns[s], dtype=float))
               for s in model.states if s in columns}
-    motion = {**columns, **{s: _smoothed(np.asarray(columns[s], dtype=float), dt) for s in model.states
+    motion = {**columns, **{s: rb.smoothed(np.asarray(columns[s], dtype=float), dt) for s in model.states
                             if s in columns}}
     _check_fixed(parsed, Roles.of(model), motion, RecordBand.of(motion, dt, levels, model=model))
     return parsed
-
-
-def _smoothed(x: np.ndarray, dt: float) -> np.ndarray:
-    """`x` smoothed as its derivative is (Savitzky-Golay, the window chosen from its noise and band): the band's
-    speeds are then the motion's, not its noise's (at 1 % noise on a position sampled at 1 kHz, central
-    differences gave 15 times the speed, and refused a cogging's periods the record shows)."""
-    from scipy.signal import savgol_filter
-
-    from ..data.derivatives import savgol_window
-
-    if x.size < 16:
-        return x
-    window = min(savgol_window(x, dt), x.size - (x.size % 2 == 0))
-    return savgol_filter(x, window, 3) if window > 4 else x
 
 
 def _check_fixed(selection: EffectSelection, roles: Roles, data: Mapping[str, np.ndarray], band: RecordBand) -> None:

@@ -106,7 +106,13 @@ class _BoundEffect(Effect):
 
 # ---------------------------------------------------------------------------------------------- square-root outflow
 def _outflow_span(level: np.ndarray, band: RecordBand, label: str) -> tuple[float, float] | None:
-    return (0.0, math.inf) if level.size and float(np.mean(level < 0.0)) <= NEGATIVE_SHARE else None
+    """Everywhere, on a level that stays non-negative: the measured one where the band has it (a linear base's
+    free run undershoots where the plant's level never went below zero: 8 % of the samples on a two-tank
+    record whose overflow and outflows were then never tried), else the free run."""
+    below = band.below_zero.get(label)
+    if below is None:
+        below = float(np.mean(level < 0.0)) if level.size else 1.0
+    return (0.0, math.inf) if level.size and below <= NEGATIVE_SHARE else None
 
 
 def _outflow_params(coef: dict[str, np.ndarray], value: float | None, roles: Roles,
@@ -134,15 +140,24 @@ LINGER = 0.03
 
 
 def _stop_span(x: np.ndarray, band: RecordBand, label: str) -> tuple[float, float] | None:
-    """The bound's size between the free run's median and its BOUND_QUANTILE quantile on the label's side, where
-    its sign is the label's; None where the state does not move or the range holds no bound of that sign."""
+    """The bound's size between the free run's median and its BOUND_QUANTILE quantile on the label's side, or the
+    measured state's extreme there (smoothed) where that lies further out, where its sign is the label's; None
+    where the state does not move or the range holds no bound of that sign.
+
+    The measured extreme: a state held at a bound for a few % of the record sits there, not beyond it, and a
+    base model's free run may reach it even less (a tank at its overflow for 3.5 % of a record: the bound, 1.037,
+    lay above the free run's quantile, the fit stopped at that edge and was refused as standing in for another
+    effect)."""
     state, side, below = _place(label)
     if x.size < 2 or not np.ptp(x) > 0:
         return None
     if state in band.lingers and band.lingers[state][side == "upper"] < LINGER:
         return None  # the measured state never sits at that end: nothing holds it there
     q = BOUND_QUANTILE if side == "upper" else 1.0 - BOUND_QUANTILE
-    lo, hi = sorted((float(np.median(x)), float(np.quantile(x, q))))
+    end = float(np.quantile(x, q))
+    if state in band.extremes:
+        end = max(end, band.extremes[state][1]) if side == "upper" else min(end, band.extremes[state][0])
+    lo, hi = sorted((float(np.median(x)), end))
     if below:
         lo, hi = -hi, -lo
     if hi <= 0.0:

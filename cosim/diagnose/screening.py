@@ -185,7 +185,8 @@ class OutputErrorScreen:
         bands (through the model), with the ranges of the free run's signals (the nuisance grids and spans are
         scaled on the noise-free free run). Made once per screen."""
         return RecordBand.of(self.free_run, self.dt, dict(zip(self.model.states, map(float, self.sigma), strict=True)),
-                             model=self.model, measured={s: self.columns[s] for s in self.measured})
+                             model=self.model, measured={s: self.columns[s] for s in self.measured},
+                             segments=self.segments)
 
     @cached_property
     def rss0(self) -> float:
