@@ -99,7 +99,7 @@ class RecordBand:
     #: two noise levels or 1 % of its range): a state held at a bound lingers there. (Raw samples: their extreme
     #: is a held level's noise peak, and this undercounts a hold, 1.1 % for a tank at its overflow 3.3 % of the
     #: time; smoothed and counting only the samples that sit still, it measured holds right, but states that
-    #: only turn at their extremes reached 4-10 %: no threshold told them apart. See docs/issue39_determinism.md.)
+    #: only turn at their extremes reached 4-10 %: no threshold told them apart. See docs/issue39_families.md.)
     lingers: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     #: Per measured signal, the share of its samples below zero (a level the plant kept non-negative, whatever a
     #: poor base model's free run does).
