@@ -116,3 +116,61 @@ def test_the_experiment_on_the_plant_names_gravity(tmp_path):
         payload["message"]
     assert payload["ambiguous"] == [] and payload["experiments"], payload["message"]
     assert payload["experiments"][0]["swing"] > 0.3  # it swung where the sine bends
+
+
+def _family_plant(index: int, max_samples: int = 4000):
+    """Record `index` of the benchmark's families (benchmarks/independent_families.py: its own equations and
+    scipy, nothing of cosim) as the generator draws it: its system, its first part's input, sample time and
+    noise fraction."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # benchmarks/ is not a package
+    import independent_families as fam
+
+    which = fam.family_of(index)
+    rng = np.random.default_rng([index, 0])
+    dt, n = fam._sizes(rng, max_samples)
+    noise_frac = fam._loguniform(rng, 0.002, 0.05)
+    draft = fam.BUILDERS[which["inner"]](rng, dt, n, which["variant"], {"method": "lsoda"}, index)
+    return draft["system"], draft["parts"][0], dt, noise_frac
+
+
+@pytest.mark.slow
+def test_a_rival_set_names_the_swing_that_separates_it_and_that_swing_does(tmp_path):
+    """Record 204 of the families, a hardening spring (Duffing, k3 1.375) measured by position only, swinging
+    +-0.61: over that swing sin x bends as x**3 does, and the answer is the cubic-or-gravity set. The set names
+    the swing that would separate them; the plant (the generator's own equations) run under that input and
+    diagnosed beside the record names the cubic spring alone."""
+    system, part, dt, noise_frac = _family_plant(204)
+    import _family_system as fs  # (benchmarks/, on the path now)
+    t = np.arange(len(part["u"]) + 1) * dt
+    k = system.states.index("x")
+
+    def written(u: np.ndarray, seed: int, sigma: float | None = None) -> tuple[str, float, float]:
+        states = fs.simulate(system, u, dt, part["x0"])
+        sigma = noise_frac * float(np.ptp(states[:, k])) if sigma is None else sigma
+        x = states[:, k] + sigma * np.random.default_rng(seed).standard_normal(len(t))
+        path = tmp_path / f"run{seed}.csv"
+        np.savetxt(path, np.column_stack([t, x, np.append(u, u[-1])]), delimiter=",", header="time,x,u",
+                   comments="")
+        return str(path), float(np.ptp(states[:, k])) / 2, sigma
+
+    options = ["--state", "x,x_dot", "--derive", "x", "--input", "u", "--json"]
+    record, swing, sigma = written(part["u"], 1)
+    result = CliRunner().invoke(main, ["diagnose", record, *options], catch_exceptions=False)
+    payload = json.loads(result.stdout)
+    assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("cubic_stiffness", "x")], \
+        payload["message"]
+    (found,) = payload["ambiguous"]
+    plan = found["to_separate"]
+    assert found["effects"] == ["cubic_stiffness", "gravity"] and plan["signal"] == "x"
+    assert plan["input_scale"] in INPUT_SCALES and plan["now"] == pytest.approx(swing, rel=0.05)
+    assert plan["at_least"] > plan["now"] and f"±{plan['at_least']:.3g} on x" in found["sentence"]
+    # the experiment, on the plant: the swing it predicted, and then no set
+    run, reached, _ = written(plan["input_scale"] * part["u"], 2, sigma)
+    assert reached == pytest.approx(plan["at_least"], rel=0.05)
+    result = CliRunner().invoke(main, ["diagnose", record, run, *options], catch_exceptions=False)
+    both = json.loads(result.stdout)
+    assert [(e["name"], e["attached_to"]) for e in both["effects"]] == [("cubic_stiffness", "x")], both["message"]
+    assert both["ambiguous"] == [] and both["effects"][0]["parameters"]["k3"] == pytest.approx(1.375, rel=0.02)

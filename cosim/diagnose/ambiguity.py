@@ -56,7 +56,6 @@ from ..errors import DataError
 from ..identify.model import IdentifiedModel
 from ._free_run import noise_level
 from ._record_band import RecordBand
-from .candidates import EffectCandidate
 from .diagnosis_report import DiagnosisReport
 from .effects import EFFECTS, Effect, Roles
 from .screening import output_error_fit
@@ -342,10 +341,10 @@ QUANTITY = {"position": "amplitude", "pair": "amplitude", "position_or_pair": "a
 
 
 def converged_rival(best: Any, trials: Sequence[Any], margin: float,
-                    fit_with: Callable[[Any], Any]) -> EffectCandidate | None:
+                    fit_with: Callable[[Any], Any]) -> Any | None:
     """The best-scoring other effect among a round's trial fits (`trials`, a few iterations each) that came
     within `margin` of the accepted one's, fitted to convergence as the accepted `best` was (`fit_with`), if it
-    is significant and still within the margin of it; else None."""
+    is significant and still within the margin of it: its trial (``candidate``, ``model``); else None."""
     mine = next((t for t in trials if (t.candidate.name, t.candidate.attached_to) ==
                  (best.candidate.name, best.candidate.attached_to)), best)
     near = [t for t in trials if t.candidate.name != best.candidate.name
@@ -355,15 +354,19 @@ def converged_rival(best: Any, trials: Sequence[Any], margin: float,
     rival = fit_with(min(near, key=lambda t: (t.candidate.delta_bic, t.candidate.name)))
     if rival is None or not rival.candidate.significant:
         return None
-    return rival.candidate if abs(rival.candidate.delta_bic - best.candidate.delta_bic) <= margin else None
+    return rival if abs(rival.candidate.delta_bic - best.candidate.delta_bic) <= margin else None
 
 
-def rival_ambiguities(report: DiagnosisReport, margin: float) -> list[Ambiguity]:
+def rival_ambiguities(report: DiagnosisReport, margin: float,
+                      noise: Mapping[str, float] | None = None) -> list[Ambiguity]:
     """Each named effect with a rival (:attr:`DiagnosisReport.rivals`: another effect whose converged fit came
-    within `margin` of its own): the two readings, and the kind of record that would separate them (a wider
-    range of the signal it attaches to)."""
+    within `margin` of its own): the two readings, and the record that would separate them: a wider range of the
+    signal it attaches to, with the least scale of the record's input that does (:func:`separating_experiment`
+    on the two readings' models, :attr:`DiagnosisReport.rival_models`) where both simulate the record."""
     out = []
     named = {(e.name, e.attached_to): e for e in report.effects}
+    models = dict(zip(((a.name, a.attached_to, b.name, b.attached_to) for a, b in report.rivals),
+                      report.rival_models, strict=False))
     for first, r in report.rivals:
         e = named.get((first.name, first.attached_to))
         if e is None:
@@ -372,11 +375,34 @@ def rival_ambiguities(report: DiagnosisReport, margin: float) -> list[Ambiguity]
         now = (float(np.ptp(report.data[signal])) / 2 if report.data is not None and signal in report.data.names
                else None)
         kind = QUANTITY.get(EFFECTS[e.name].attaches_to, "amplitude") if e.name in EFFECTS else "amplitude"
+        pair = models.get((first.name, first.attached_to, r.name, r.attached_to), ())
+        experiment = _rival_experiment(pair, report.data, signal, noise) if pair else None
         out.append(Ambiguity((e.name, r.name), e.attached_to, (f"{e.name} on {e.attached_to}",
                              f"{r.name} on {r.attached_to}"), float(r.delta_bic - first.delta_bic), float(margin),
-                             {"quantity": kind, "signal": signal, "at_least": None, "now": now, "input_scale": None},
-                             (), tuple(dict.fromkeys((e.attached_to, r.attached_to)))))
+                             {"quantity": kind, "signal": signal, "at_least": None, "now": now, "input_scale": None,
+                              **(experiment or {})},
+                             tuple(pair), tuple(dict.fromkeys((e.attached_to, r.attached_to)))))
     return out
+
+
+def _rival_experiment(pair: Sequence[IdentifiedModel], record: Trajectory | None, signal: str,
+                      noise: Mapping[str, float] | None) -> dict[str, Any] | None:
+    """:func:`separating_experiment` between a named effect's model and its rival's on the record (None where
+    they differ in their signals or the record lacks one: a delay's delayed input)."""
+    first, second = pair
+    names = (*first.states, *first.inputs)
+    if record is None or (first.states, first.inputs) != (second.states, second.inputs) or \
+            not all(n in record.names for n in names):
+        return None
+    cols = _columns(first, record)
+    levels = {s: float(noise[s]) if noise and s in noise else noise_level(cols[s]) for s in first.states}
+    found = separating_experiment(first, second, cols, float(record.dt), levels,
+                                  signal if signal in first.states else first.states[0])
+    if signal not in first.states:  # an input's effect: the swing of the input itself
+        scale = found["input_scale"]
+        found = {**found, "signal": signal, "now": float(np.ptp(cols[signal])) / 2 if signal in cols else None,
+                 "at_least": None if scale is None or signal not in cols else scale * float(np.ptp(cols[signal])) / 2}
+    return {k: v for k, v in found.items() if k != "quantity"}
 
 
 #: Most experiments run on a plant to settle the sets (each the next larger input scale when a set remains).
@@ -396,8 +422,8 @@ def settled(report: DiagnosisReport, records: Sequence[Trajectory], names: Seque
     those runs (`rediagnose`), the answer of both."""
     def sets_of(rep: DiagnosisReport) -> list[Ambiguity]:
         if rep.data is None:
-            return rival_ambiguities(rep, margin)
-        return rival_ambiguities(rep, margin) + linearisation_ambiguities(
+            return rival_ambiguities(rep, margin, noise)
+        return rival_ambiguities(rep, margin, noise) + linearisation_ambiguities(
             rep.model_after, rep.data, names, margin=margin, noise=noise, measured=measured,
             found=[(e.name, e.attached_to) for e in rep.effects])
 

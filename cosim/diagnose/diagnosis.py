@@ -308,7 +308,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     check = HeldOutCheck(columns, starts, first.dt, sigma, fit.estimate_x0, fit.measured) if held_out else None
     if check is not None and not check.possible:
         check = None
-    accepted, rounds, fitted, steps, rejected, dropped, rivals = [], [], [], [], [], [], []
+    accepted, rounds, fitted, steps, rejected, dropped, rivals, rival_models = [], [], [], [], [], [], [], []
     nuisances: list[Nuisance] = []
     owners: list[int] = []
     bar = tqdm(total=max_effects, unit="round", desc="diagnose", leave=False,
@@ -356,7 +356,9 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             break
         rival = converged_rival(best, trials, bic_margin, lambda t, base=current, nus=nuisances, sc=screen: _fit_with(
             t.start or base, t.candidate, columns, dt, nus, sc, alpha, bic_margin, min_size, fit))
-        rivals += [(best.candidate, rival)] if rival is not None else []
+        if rival is not None:
+            rivals.append((best.candidate, rival.candidate))
+            rival_models.append((best.model, rival.model))
         accepted.append(best.candidate)
         if best.nuisance is not None:
             owners.append(len(accepted) - 1)
@@ -434,6 +436,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                            model_before=model, model_after=final, before=before, after=after,
                            residuals_before=res_before, residuals_after=res_after, message=message, data=work,
                            rejected=tuple(rejected), dropped_terms=tuple(dropped), rivals=tuple(rivals),
+                           rival_models=tuple(rival_models),
                            analysis={"decimation": factor, "dt": dt, "record_dt": given[0].dt})
 
 

@@ -79,6 +79,9 @@ class DiagnosisReport:
     rivals : tuple of (EffectCandidate, EffectCandidate)
         Each accepted effect and another effect whose fit, to convergence as the accepted one's, came within
         the BIC margin of it in that round (the source of the rival sets in `ambiguous`).
+    rival_models : tuple of (IdentifiedModel, IdentifiedModel)
+        For each of `rivals`, the model with the accepted effect and the model with its rival, as fitted in that
+        round (what the experiment between them is computed on).
     experiments : tuple of dict
         Experiments run on a plant (``plant=``) to settle an ambiguity: ``effects``, ``input_scale``,
         ``signal``, ``swing`` (half its range in the run), ``samples``; their records were diagnosed beside the
@@ -103,6 +106,7 @@ class DiagnosisReport:
     analysis: dict[str, Any] = field(default_factory=dict)
     ambiguous: tuple[Ambiguity, ...] = ()
     rivals: tuple[tuple[EffectCandidate, EffectCandidate], ...] = ()
+    rival_models: tuple[tuple[IdentifiedModel, IdentifiedModel], ...] = field(default=(), repr=False, compare=False)
     experiments: tuple[dict[str, Any], ...] = ()
 
     @property
