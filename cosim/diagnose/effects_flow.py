@@ -108,7 +108,7 @@ class _BoundEffect(Effect):
 def _outflow_span(level: np.ndarray, band: RecordBand, label: str) -> tuple[float, float] | None:
     """Everywhere, on a level that stays non-negative: the measured one where the band has it (a linear base's
     free run undershoots where the plant's level never went below zero: 8 % of the samples on a two-tank
-    record whose overflow and outflows were then never tried), else the free run."""
+    record, whose outflows were then never tried), else the free run."""
     below = band.below_zero.get(label)
     if below is None:
         below = float(np.mean(level < 0.0)) if level.size else 1.0
@@ -145,9 +145,9 @@ def _stop_span(x: np.ndarray, band: RecordBand, label: str) -> tuple[float, floa
     where the state does not move or the range holds no bound of that sign.
 
     The measured extreme: a state held at a bound for a few % of the record sits there, not beyond it, and a
-    base model's free run may reach it even less (a tank at its overflow for 3.5 % of a record: the bound, 1.037,
-    lay above the free run's quantile, the fit stopped at that edge and was refused as standing in for another
-    effect)."""
+    base model's free run may reach it even less (a tank at its overflow for 3.3 % of a record: the bound, 1.037,
+    lay above the free run's 97 % quantile, the fit stopped at that edge and was refused as standing in for
+    another effect)."""
     state, side, below = _place(label)
     if x.size < 2 or not np.ptp(x) > 0:
         return None
