@@ -47,6 +47,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
+from itertools import zip_longest
 from typing import Any
 
 import numpy as np
@@ -365,9 +366,7 @@ def rival_ambiguities(report: DiagnosisReport, margin: float,
     on the two readings' models, :attr:`DiagnosisReport.rival_models`) where both simulate the record."""
     out = []
     named = {(e.name, e.attached_to): e for e in report.effects}
-    models = dict(zip(((a.name, a.attached_to, b.name, b.attached_to) for a, b in report.rivals),
-                      report.rival_models, strict=False))
-    for first, r in report.rivals:
+    for (first, r), pair in zip_longest(report.rivals, report.rival_models, fillvalue=()):
         e = named.get((first.name, first.attached_to))
         if e is None:
             continue  # (dropped in a later round)
@@ -375,7 +374,6 @@ def rival_ambiguities(report: DiagnosisReport, margin: float,
         now = (float(np.ptp(report.data[signal])) / 2 if report.data is not None and signal in report.data.names
                else None)
         kind = QUANTITY.get(EFFECTS[e.name].attaches_to, "amplitude") if e.name in EFFECTS else "amplitude"
-        pair = models.get((first.name, first.attached_to, r.name, r.attached_to), ())
         experiment = _rival_experiment(pair, report.data, signal, noise) if pair else None
         out.append(Ambiguity((e.name, r.name), e.attached_to, (f"{e.name} on {e.attached_to}",
                              f"{r.name} on {r.attached_to}"), float(r.delta_bic - first.delta_bic), float(margin),
