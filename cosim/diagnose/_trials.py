@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
@@ -268,7 +268,7 @@ def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[
     n_eff = screen.n_obs / factor
     delta_bic = n_eff * math.log(cost1 / cost0) + q * math.log(n_eff)
     variance = factor * cost1 / max(screen.n_obs - screen.base.shape[1] - q, 1)
-    p_value = float(stats.chi2.sf((cost0 - cost1) / variance, max(q, 1)))
+    p_value = float(special.chdtrc(max(q, 1), (cost0 - cost1) / variance))
     size = math.sqrt(cost0 - cost1) / max(screen.scale_y, 1e-300)
     return delta_bic, p_value, size, factor
 

@@ -44,7 +44,7 @@ from functools import cached_property
 from typing import Any
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import linalg, special
 
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
@@ -357,7 +357,7 @@ class OutputErrorScreen:
         q = gram.shape[0]
         rss1 = max(self.rss0 - drop, 1e-300)
         delta_bic = self.n_obs * math.log(rss1 / self.rss0) + q * math.log(self.n_obs)
-        p_value = float(stats.chi2.sf(drop / self.variance, q))
+        p_value = float(special.chdtrc(q, drop / self.variance))
         se = np.sqrt(np.clip(np.diag(inv) * self.variance, 0, None))
         return {"delta_bic": delta_bic, "p_value": p_value, "size": math.sqrt(drop) / max(self.scale_y, 1e-300),
                 "coef": coef, "se": se, "drop": drop}
