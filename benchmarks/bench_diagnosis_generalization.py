@@ -180,6 +180,13 @@ def _train_data(folder: Path, cli: dict, every: bool = False):
     return data if every else data[0]
 
 
+def _model_from(data: dict | None):
+    """A model from the dict form a diagnosis JSON holds (None: none given)."""
+    from cosim.identify.model import IdentifiedModel
+
+    return IdentifiedModel.from_dict(data) if data else None
+
+
 def _model_before_a(folder: Path, cli: dict):
     """Path (a)'s model before, fitted in-process as ``cosim diagnose`` fits it without --model."""
     from cosim.diagnose.diagnosis import BASE_SETTINGS  # the settings `cosim diagnose` identifies with
@@ -303,7 +310,10 @@ def run_record(index: int, data_dir: str, max_samples: int, paths: tuple[str, ..
         res.update(score(spec, cli, effects, after_path, res["ambiguous"]))
         if effects and heldout:
             try:
-                res.update(heldout_figures(path, [e["name"] for e in effects], folder, spec, cli))
+                # path (a)'s model before: the base its command identified, as its JSON gives it (identified
+                # again here only where the JSON has none: older cosim versions)
+                given = _model_from(payload.get("model_before")) if path == "a" else None
+                res.update(heldout_figures(path, [e["name"] for e in effects], folder, spec, cli, before=given))
             except Exception as exc:
                 row["failures"].append({"path": path, "command": "held-out simulation",
                                         "error": f"{type(exc).__name__}: {exc}"})

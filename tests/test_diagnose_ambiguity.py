@@ -107,14 +107,15 @@ def test_the_experiment_on_the_plant_names_gravity(tmp_path):
                                 "--seed", "1", "-o", str(data)])
     assert made.exit_code == 0, made.output
     states = ["--state", "theta_m,omega_m,theta_L,omega_L", "--input", "Tm", "--json"]
-    alone = json.loads(runner.invoke(main, ["diagnose", str(data), *states]).stdout)
-    assert [s["effects"] for s in alone["ambiguous"]] == [["gravity", "spring"]], alone["message"]
     result = runner.invoke(main, ["diagnose", str(data), *states, "--plant", "bundled", "--set", "mgl=4440"])
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)
     assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("gravity", "theta_L")], \
         payload["message"]
     assert payload["ambiguous"] == [] and payload["experiments"], payload["message"]
+    # an experiment runs only for a set the record alone left open: this one was for gravity or a spring (the
+    # record diagnosed alone, without --plant, gives that set; not run again here: 16 s)
+    assert payload["experiments"][0]["effects"] == ["gravity", "spring"]
     assert payload["experiments"][0]["swing"] > 0.3  # it swung where the sine bends
 
 

@@ -115,7 +115,10 @@ class DiagnosisReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form: ``effects`` (accepted, in the order found; empty when none), ``before``/``after`` with
-        ``nrmse_pct`` and ``r2``, ``rejected`` (candidates that failed on held-out data) and ``dropped_terms``."""
+        ``nrmse_pct`` and ``r2``, ``rejected`` (candidates that failed on held-out data), ``dropped_terms``, and
+        ``model_before``, the model diagnosed as a model file holds it
+        (:meth:`~cosim.identify.model.IdentifiedModel.from_dict` reads it back: the base that ``cosim diagnose``
+        identified, when it was given none)."""
         return {"effects": [e.to_dict() for e in self.effects], "before": self.before, "after": self.after,
                 "ranking": [e.to_dict() for e in self.ranking[:12]], "message": self.message,
                 "trials": [[{"name": c.name, "attached_to": c.attached_to, "delta_bic": c.delta_bic,
@@ -125,7 +128,7 @@ class DiagnosisReport:
                 "analysis": dict(self.analysis), "ambiguous": [a.to_dict() for a in self.ambiguous],
                 "to_separate": [{"effects": list(a.effects), **a.to_separate} for a in self.ambiguous],
                 "experiments": [dict(e) for e in self.experiments],
-                "equations_after": self.model_after.equations()}
+                "equations_after": self.model_after.equations(), "model_before": self.model_before.to_dict()}
 
     def plot_evidence(self, path: str | os.PathLike | None = None, *, bins: int = 30) -> matplotlib.figure.Figure:
         """For each accepted effect (or the top candidate), the residuals of its row against the signal it
