@@ -272,7 +272,7 @@ def markdown(result: dict[str, Any]) -> str:
                          f"{f['median_param_error_pct']:.1f} ({f['param_errors']}) | "
                          f"{f['accepted_worse_heldout']} | {f['median_time_s']:.1f} |")
         o = s["overall"]
-        lines += ["", "| overall | measured | issue's threshold | met |", "| --- | --- | --- | --- |"]
+        lines += ["", "| overall | measured | issue 13's threshold | met |", "| --- | --- | --- | --- |"]
         labels = {"right_first_pct": "named right first %", "false_claims_pct": "false claims %",
                   "median_param_error_pct": "median parameter error %",
                   "accepted_worse_heldout": "accepted effects raising the held-out error",
