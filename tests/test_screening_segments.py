@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from cosim.diagnose import _sensitivity
 from cosim.diagnose._sensitivity import Propagator, propagate_stepwise
 from cosim.diagnose.screening import (
     OutputErrorScreen,
@@ -139,9 +140,20 @@ def test_bad_segments_say_what_is_wrong(two_records):
         OutputErrorScreen(model(), columns, DT, x0=[0.0, 0.0], segments=[0, 3000])
 
 
+@pytest.fixture(params=["c_loop", "block_scan"])
+def recursion(request, monkeypatch):
+    """Each implementation of the recursion: the compiled C loop (where a C compiler works, as here) and the
+    NumPy block scan it falls back to."""
+    if request.param == "c_loop":
+        assert _sensitivity._c_propagate() is not None, "the C loop did not compile"
+    else:
+        monkeypatch.setattr(_sensitivity, "_c_propagate", lambda: None)
+    return request.param
+
+
 @pytest.mark.parametrize("varying", [False, True])
 @pytest.mark.parametrize("steps", [1, 7, 500, 2001])
-def test_block_recursion_matches_the_step_by_step_one(varying, steps):
+def test_block_recursion_matches_the_step_by_step_one(varying, steps, recursion):
     rng = np.random.default_rng(steps)
     n, m = 3, 5
     a0 = rng.standard_normal((n, n)) - 2 * np.eye(n)

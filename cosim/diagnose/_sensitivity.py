@@ -23,14 +23,56 @@ sample-by-sample loop, so the result differs from it by rounding only (relative 
 tests compare with). Written by hand rather than generated with CasADi (``mapaccum``): its virtual machine
 steps one sample per call too, at some nanoseconds per scalar operation, slower than NumPy's batched
 products for more than a few columns.
+
+Where a C compiler works (the one the bundled FMUs are built with), the recursion runs sample by sample in a
+small C loop instead (:data:`_C_SOURCE`, compiled once per machine into cosim's cache): on EMPS (two states,
+25 000 samples) a tenth of the block scan's time, and its sums are associated the same way on every machine
+(no BLAS call, whose kernel picks its own order). Its result is :func:`propagate_stepwise`'s to rounding (both
+step sample by sample), the block scan's to 1e-13.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
+
+#: ``out[k+1] += M[k] out[k]`` for k < steps: `out` holds the forcing ``g[k]`` at row k+1 and the start at row 0
+#: on entry, the sensitivities on exit; ``M[k]`` is ``trans + k * stride`` (stride 0: one matrix for all steps).
+#: Each entry's products are summed in one order (l = 0..n-1), then added to the forcing, as the block scan does.
+_C_SOURCE = """
+void cosim_propagate(long steps, long n, long m, const double *trans, long stride, double *out) {
+    for (long k = 0; k < steps; ++k) {
+        const double *M = trans + k * stride, *s = out + k * n * m;
+        double *next = out + (k + 1) * n * m;
+        for (long i = 0; i < n; ++i)
+            for (long j = 0; j < m; ++j) {
+                double acc = 0.0;
+                for (long l = 0; l < n; ++l)
+                    acc += M[i * n + l] * s[l * m + j];
+                next[i * m + j] += acc;
+            }
+    }
+}
+"""
+
+
+@lru_cache(maxsize=1)
+def _c_propagate():
+    """The compiled loop, or None where no C compiler works (the block scan runs then)."""
+    from ..identify._jit import compiled_c
+
+    library = compiled_c(_C_SOURCE, "cosim_propagate")
+    if library is None:
+        return None
+    function = library.cosim_propagate
+    pointer = ctypes.POINTER(ctypes.c_double)
+    function.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_long, pointer, ctypes.c_long, pointer]
+    function.restype = None
+    return function
 
 
 class Propagator:
@@ -39,6 +81,15 @@ class Propagator:
     def __init__(self, ad: np.ndarray, gamma: np.ndarray, delta_j: np.ndarray | None, steps: int) -> None:
         n = ad.shape[0]
         self.ad, self.gamma, self.steps, self.n = ad, gamma, int(steps), n
+        self._loop = _c_propagate()
+        if self._loop is not None:  # the C loop steps sample by sample: only each step's matrix is needed
+            self.L, self.B = 1, self.steps
+            self.trans = None
+            if delta_j is not None:
+                trans = np.matmul(gamma, delta_j[:self.steps])
+                trans += ad
+                self.trans = trans
+            return
         # passes 1 and 3 cost ~L batched calls, pass 2 ~N/L small ones (cheaper each)
         self.L = max(1, min(self.steps, int(math.sqrt(self.steps / 2.0)) + 1))
         self.B = -(-self.steps // self.L)
@@ -90,6 +141,12 @@ class Propagator:
         out[0] = 0.0 if s0 is None else s0
         if self.steps == 0:
             return out[:1]
+        if self._loop is not None:
+            matrices = np.ascontiguousarray(self.ad if self.trans is None else self.trans, dtype=float)
+            pointer = ctypes.POINTER(ctypes.c_double)
+            self._loop(self.steps, n, m, matrices.ctypes.data_as(pointer), 0 if self.trans is None else n * n,
+                       out.ctypes.data_as(pointer))
+            return out[:self.steps + 1]
         g = out[1:].reshape(B, L, n, m)
         step = np.empty((B, n, m))
         for j in range(1, L):  # pass 1: every block from zero, all blocks at once

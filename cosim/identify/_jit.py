@@ -10,6 +10,7 @@ persistent cache of compiled functions.
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import subprocess
@@ -35,36 +36,55 @@ def compiled(function, name: str):
     if sys.platform.startswith("win"):
         return None
     try:
-        from ..plant.build import fmu_cache_dir
-        from ..plant.toolchain import compiler_version, find_compiler
-
-        compiler = find_compiler()
         with tempfile.TemporaryDirectory() as tmp:
             generator = ca.CodeGenerator(f"{name}.c")
             generator.add(function)
             generator.generate(tmp + os.sep)
-            source = Path(tmp, f"{name}.c")
-            key = hashlib.sha256(source.read_bytes() + compiler_version(compiler).encode()).hexdigest()[:24]
-            folder = fmu_cache_dir() / "jit"
-            library = folder / f"{name}_{key}.so"
-            if not library.is_file():
-                folder.mkdir(parents=True, exist_ok=True)
-                fd, partial = tempfile.mkstemp(dir=folder, prefix=f".{name}-", suffix=".so.tmp")
-                os.close(fd)
-                try:
-                    # no fused multiply-add: the same bits as Python's arithmetic on every machine
-                    subprocess.run([*compiler, "-O1", "-ffp-contract=off", "-shared", "-fPIC", str(source), "-o",
-                                    partial, "-lm"], capture_output=True, timeout=COMPILE_TIMEOUT_S, check=True)
-                    os.chmod(partial, 0o755)
-                    os.replace(partial, library)  # atomic: a concurrent process sees all of it or nothing
-                finally:
-                    Path(partial).unlink(missing_ok=True)
-                prune(folder, MAX_LIBRARIES)
-            else:
-                os.utime(library)  # used now: the last to be pruned
+            library = _library(Path(tmp, f"{name}.c").read_bytes(), name)
         return ca.external(name, str(library))
     except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build: the interpreter runs it
         return None
+
+
+def compiled_c(source: str, name: str) -> ctypes.CDLL | None:
+    """Hand-written C `source` compiled (as :func:`compiled`'s, cached the same way) and loaded with ctypes, or
+    None where that cannot be done: the caller then runs its NumPy version."""
+    if sys.platform.startswith("win"):
+        return None
+    try:
+        return ctypes.CDLL(str(_library(source.encode(), name)))
+    except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build
+        return None
+
+
+def _library(source: bytes, name: str) -> Path:
+    """The shared library of C `source`, from the cache or compiled into it (atomically); raises where it cannot."""
+    from ..plant.build import fmu_cache_dir
+    from ..plant.toolchain import compiler_version, find_compiler
+
+    compiler = find_compiler()
+    key = hashlib.sha256(source + compiler_version(compiler).encode()).hexdigest()[:24]
+    folder = fmu_cache_dir() / "jit"
+    library = folder / f"{name}_{key}.so"
+    if library.is_file():
+        os.utime(library)  # used now: the last to be pruned
+        return library
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp, f"{name}.c")
+        path.write_bytes(source)
+        fd, partial = tempfile.mkstemp(dir=folder, prefix=f".{name}-", suffix=".so.tmp")
+        os.close(fd)
+        try:
+            # no fused multiply-add: the same bits as Python's arithmetic on every machine
+            subprocess.run([*compiler, "-O1", "-ffp-contract=off", "-shared", "-fPIC", str(path), "-o", partial,
+                            "-lm"], capture_output=True, timeout=COMPILE_TIMEOUT_S, check=True)
+            os.chmod(partial, 0o755)
+            os.replace(partial, library)  # atomic: a concurrent process sees all of it or nothing
+        finally:
+            Path(partial).unlink(missing_ok=True)
+    prune(folder, MAX_LIBRARIES)
+    return library
 
 
 def prune(folder: Path, keep: int) -> list[Path]:
