@@ -264,3 +264,17 @@ def test_a_client_whose_event_loop_did_not_start_is_tried_again(fails, connects)
     else:
         with pytest.raises(CosimError, match=r"could not start its event loop in 3 tries of 10 s each"):
             _client(starved, "tcp://127.0.0.1:8786", 1.0)
+
+
+def test_a_refused_connection_leaves_no_half_made_client_behind():
+    """A Client whose constructor failed sits in a reference cycle; collected later, at a moment nobody chose,
+    its __del__ closes a loop runner, and when that moment fell inside another Client's start the two waited on
+    each other for ever (a CI run hung in test_unreachable_scheduler, 2026-12-02). The sweep collects it at once."""
+    import gc
+
+    import distributed
+
+    for scheduler in ("bogus://x", "tcp://127.0.0.1:1"):
+        with pytest.raises(InvalidSettingError):
+            run_sweep(_example_case, CASES, scheduler=scheduler, connect_timeout=1, progress=False)
+        assert not [o for o in gc.get_objects() if isinstance(o, distributed.Client)], scheduler

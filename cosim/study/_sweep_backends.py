@@ -10,6 +10,7 @@ advancing a progress bar as cases complete. :func:`_run_case` is what runs one c
 from __future__ import annotations
 
 import concurrent.futures
+import gc
 import multiprocessing
 import sys
 import time
@@ -191,10 +192,21 @@ def _client(client_class: Callable[..., Any], scheduler: str, timeout: float) ->
     is tried, up to `_LOOP_START_ATTEMPTS` times, before saying so in one line.
     """
     for _ in range(_LOOP_START_ATTEMPTS):
+        error: BaseException | None = None
         try:
             return client_class(scheduler, timeout=timeout, set_as_default=False)
         except AssertionError:
-            continue
+            pass
+        except BaseException as exc:  # noqa: BLE001 - raised again below
+            error = exc.with_traceback(None)  # its frames hold the half-made client
+        # A client whose constructor failed is left in a reference cycle. Collected later, its __del__ closes its
+        # loop runner, and if that collection runs while another client is starting the loop runner, both wait
+        # on its lock for ever (seen in CI, 2026-12-02: test_sweep.py's unreachable scheduler hung in
+        # Client.__init__ -> LoopRunner.start -> gc -> Client.__del__ -> LoopRunner.stop). Collected now, it
+        # closes while no other client is starting.
+        gc.collect()
+        if error is not None:
+            raise error
     raise CosimError(f"Dask's client could not start its event loop in {_LOOP_START_ATTEMPTS} tries of "
                      "10 s each: this machine is too busy; try again when it is less loaded")
 
