@@ -59,6 +59,8 @@ void cosim_propagate(long steps, long n, long m, const double *trans, long strid
 }
 """
 
+_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+
 
 @lru_cache(maxsize=1)
 def _c_propagate():
@@ -69,8 +71,7 @@ def _c_propagate():
     if library is None:
         return None
     function = library.cosim_propagate
-    pointer = ctypes.POINTER(ctypes.c_double)
-    function.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_long, pointer, ctypes.c_long, pointer]
+    function.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_long, _DOUBLE_P, ctypes.c_long, _DOUBLE_P]
     function.restype = None
     return function
 
@@ -89,6 +90,9 @@ class Propagator:
                 trans = np.matmul(gamma, delta_j[:self.steps])
                 trans += ad
                 self.trans = trans
+            # what the loop reads, made once (a screen runs it for every group of columns)
+            self._matrices = np.ascontiguousarray(ad if self.trans is None else self.trans, dtype=float)
+            self._stride = 0 if self.trans is None else n * n
             return
         # passes 1 and 3 cost ~L batched calls, pass 2 ~N/L small ones (cheaper each)
         self.L = max(1, min(self.steps, int(math.sqrt(self.steps / 2.0)) + 1))
@@ -142,10 +146,8 @@ class Propagator:
         if self.steps == 0:
             return out[:1]
         if self._loop is not None:
-            matrices = np.ascontiguousarray(self.ad if self.trans is None else self.trans, dtype=float)
-            pointer = ctypes.POINTER(ctypes.c_double)
-            self._loop(self.steps, n, m, matrices.ctypes.data_as(pointer), 0 if self.trans is None else n * n,
-                       out.ctypes.data_as(pointer))
+            self._loop(self.steps, n, m, self._matrices.ctypes.data_as(_DOUBLE_P), self._stride,
+                       out.ctypes.data_as(_DOUBLE_P))
             return out[:self.steps + 1]
         g = out[1:].reshape(B, L, n, m)
         step = np.empty((B, n, m))
