@@ -84,15 +84,13 @@ class Propagator:
         self.ad, self.gamma, self.steps, self.n = ad, gamma, int(steps), n
         self._loop = _c_propagate()
         if self._loop is not None:  # the C loop steps sample by sample: only each step's matrix is needed
-            self.L, self.B = 1, self.steps
-            self.trans = None
-            if delta_j is not None:
-                trans = np.matmul(gamma, delta_j[:self.steps])
-                trans += ad
-                self.trans = trans
+            self.L, self.B = 1, self.steps  # (the buffers' length)
             # what the loop reads, made once (a screen runs it for every group of columns)
-            self._matrices = np.ascontiguousarray(ad if self.trans is None else self.trans, dtype=float)
-            self._stride = 0 if self.trans is None else n * n
+            if delta_j is None:
+                self._matrices, self._stride = np.ascontiguousarray(ad, dtype=float), 0
+            else:
+                self._matrices, self._stride = np.matmul(gamma, delta_j[:self.steps]), n * n
+                self._matrices += ad
             return
         # passes 1 and 3 cost ~L batched calls, pass 2 ~N/L small ones (cheaper each)
         self.L = max(1, min(self.steps, int(math.sqrt(self.steps / 2.0)) + 1))
