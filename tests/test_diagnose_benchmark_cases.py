@@ -271,3 +271,23 @@ def test_a_base_term_goes_only_when_its_refit_pays_in_bic(tmp_path):
     payload = json.loads(result.stdout)
     assert [e["name"] for e in payload["effects"]] == ["stribeck"], payload["message"]
     assert bench.heldout_nrmse(folder / "model_after_a.json", folder, spec, cli) < 35.0
+
+
+@pytest.mark.slow
+def test_a_stribeck_velocity_at_the_edge_of_the_speeds_is_a_rival_set_not_lost(tmp_path):
+    """Record 152: a single mass under PRBS with a Stribeck friction whose velocity (0.64) lies above a third
+    of the top speed (1.8), the span's edge. Fitted there the Stribeck reading beats a Coulomb friction by
+    thousands in BIC, but a physical nuisance at its span's edge is not claimed, and the Coulomb friction used to
+    be named alone (a false claim). It is now the set, with the faster motion that would separate the two."""
+    spec, payload = _diagnose(152, tmp_path, version=3)
+    assert [e["name"] for e in spec["effects"]] == ["stribeck"]
+    # (the case: the first round's Stribeck fit lands near the plant's velocity, at the span's edge, unclaimed)
+    stribeck = next(t for t in payload["trials"][0] if t["name"] == "stribeck")
+    assert not stribeck["significant"]
+    assert stribeck["parameters"]["vs"] == pytest.approx(spec["effects"][0]["params"]["vs"], rel=0.10)
+    sets = payload["ambiguous"]
+    assert [s["effects"] for s in sets] == [["coulomb_friction", "stribeck"]], payload["message"]
+    assert sets[0]["delta_bic"] < -sets[0]["margin"] and "edge of what the record shows" in sets[0]["sentence"]
+    plan = sets[0]["to_separate"]
+    assert plan["quantity"] == "speed range" and plan["signal"] == "v" and plan["at_least"] > plan["now"]
+

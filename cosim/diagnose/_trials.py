@@ -248,11 +248,13 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     # is only the sharpest switch the record resolves)
     edge = own is not None and effect.nuisance != "smoothing_velocity" and \
         (nuis[-1].at_bound(-1.0) or nuis[-1].at_bound(1.0))
+    shows = bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible)
+    # (one at the edge is not claimed, but it is a reading the data fit: a rival of the effect named, not proof
+    # of it, :func:`~cosim.diagnose.ambiguity.converged_rival`)
     cand = replace(cand, delta_bic=delta_bic, p_value=p_value,
                    explained={"size": size, "plausible": plausible, "correlation_factor": factor,
-                              "nuisance_at_bound": edge},
-                   significant=bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible
-                                    and not edge))
+                              "nuisance_at_bound": edge, "rival_only": shows and edge},
+                   significant=shows and not edge)
     return _Trial(cand, model, nuis, own, new_cols)
 
 

@@ -114,8 +114,12 @@ class Ambiguity:
     def sentence(self) -> str:
         """What the data cannot tell, and what would."""
         s = self.to_separate
-        said = (f"{' or '.join(self.readings)}: these data cannot tell them apart (BIC {abs(self.delta_bic):.3g} "
-                f"apart, a claim needs {self.margin:g})")
+        if self.delta_bic < -self.margin:  # a rival never named: its physical parameter at the record's edge
+            said = (f"{' or '.join(self.readings)}: the second fits these data better (BIC {-self.delta_bic:.3g} "
+                    f"lower), but at the edge of what the record shows, so neither is claimed over the other")
+        else:
+            said = (f"{' or '.join(self.readings)}: these data cannot tell them apart (BIC "
+                    f"{abs(self.delta_bic):.3g} apart, a claim needs {self.margin:g})")
         if s.get("at_least") is None:
             return said + f"; a record over a wider {s['quantity']} of {s['signal']} would separate them"
         return (said + f"; swings of at least ±{s['at_least']:.3g} on {s['signal']} (the record's input "
@@ -348,14 +352,24 @@ def converged_rival(best: Any, trials: Sequence[Any], margin: float,
     is significant and still within the margin of it: its trial (``candidate``, ``model``); else None."""
     mine = next((t for t in trials if (t.candidate.name, t.candidate.attached_to) ==
                  (best.candidate.name, best.candidate.attached_to)), best)
-    near = [t for t in trials if t.candidate.name != best.candidate.name
+    near = [t for t in trials if t.candidate.name != best.candidate.name and _fits_as_reading(t.candidate)
             and t.candidate.delta_bic - min(mine.candidate.delta_bic, best.candidate.delta_bic) <= margin]
     if not near:
         return None
     rival = fit_with(min(near, key=lambda t: (t.candidate.delta_bic, t.candidate.name)))
-    if rival is None or not rival.candidate.significant:
+    if rival is None or not _fits_as_reading(rival.candidate):
         return None
-    return rival if abs(rival.candidate.delta_bic - best.candidate.delta_bic) <= margin else None
+    gap = rival.candidate.delta_bic - best.candidate.delta_bic
+    # a reading whose physical parameter ends at the edge of what the record shows is never named, so one that
+    # fits better by any amount is a rival too: the data do not establish the named effect against it
+    edge = not rival.candidate.significant
+    return rival if (gap <= margin if edge else abs(gap) <= margin) else None
+
+
+def _fits_as_reading(cand: Any) -> bool:
+    """Whether a trial's candidate is a reading of the data: significant, or so but for its physical nuisance
+    at the edge of its span (a Stribeck velocity above the speeds that would show its decay)."""
+    return bool(cand.significant or (cand.explained or {}).get("rival_only"))
 
 
 def rival_ambiguities(report: DiagnosisReport, margin: float,

@@ -340,7 +340,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             if trials[-1] is not None and trials[-1].candidate.significant:
                 realised = min(realised, trials[-1].candidate.delta_bic)
         fitted.append(tuple(t.candidate for t in trials if t is not None))
-        trials = _bounded_first(sorted((t for t in trials if t is not None and t.candidate.significant),
+        readings = [t for t in trials if t is not None]
+        trials = _bounded_first(sorted((t for t in readings if t.candidate.significant),
                                        key=lambda t: t.candidate.delta_bic), screen.n_obs)
         best = None
         for trial in trials[:HELD_OUT_TRIES]:
@@ -354,7 +355,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
             break
         if best is None:
             break
-        rival = converged_rival(best, trials, bic_margin, lambda t, base=current, nus=nuisances, sc=screen: _fit_with(
+        rival = converged_rival(best, readings, bic_margin, lambda t, base=current, nus=nuisances, sc=screen: _fit_with(
             t.start or base, t.candidate, columns, dt, nus, sc, alpha, bic_margin, min_size, fit))
         if rival is not None:
             rivals.append((best.candidate, rival.candidate))
