@@ -349,7 +349,8 @@ def converged_rival(best: Any, trials: Sequence[Any], margin: float,
                     fit_with: Callable[[Any], Any]) -> Any | None:
     """The best-scoring other effect among a round's trial fits (`trials`, a few iterations each) that came
     within `margin` of the accepted one's, fitted to convergence as the accepted `best` was (`fit_with`), if it
-    is significant and still within the margin of it: its trial (``candidate``, ``model``); else None."""
+    is significant and still within the margin of it, or significant but for a nuisance at its span's edge and
+    not worse than `best` by more than the margin: its trial (``candidate``, ``model``); else None."""
     mine = next((t for t in trials if (t.candidate.name, t.candidate.attached_to) ==
                  (best.candidate.name, best.candidate.attached_to)), best)
     near = [t for t in trials if t.candidate.name != best.candidate.name and _fits_as_reading(t.candidate)

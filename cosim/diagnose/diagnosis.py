@@ -339,8 +339,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
                                     identify_again=realised == 0.0 and k < IDENTIFIED_STARTS))
             if trials[-1] is not None and trials[-1].candidate.significant:
                 realised = min(realised, trials[-1].candidate.delta_bic)
-        fitted.append(tuple(t.candidate for t in trials if t is not None))
-        readings = [t for t in trials if t is not None]
+        readings = [t for t in trials if t is not None]  # (every fitted trial: a rival may be one unclaimed)
+        fitted.append(tuple(t.candidate for t in readings))
         trials = _bounded_first(sorted((t for t in readings if t.candidate.significant),
                                        key=lambda t: t.candidate.delta_bic), screen.n_obs)
         best = None
