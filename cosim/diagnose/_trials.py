@@ -29,7 +29,7 @@ from scipy import special
 from ..errors import DataError
 from ..identify.model import IdentifiedModel
 from .candidates import EffectCandidate, _uncertainty
-from .effects import EFFECTS, Attachment, Effect, Roles
+from .effects import EFFECTS, Attachment, Roles
 from .screening import (
     Nuisance,
     OutputErrorScreen,
@@ -242,13 +242,12 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
     if cost1 >= cost0:
         return None
     delta_bic, p_value, size, factor = _evidence(screen, model, cols, dt, cost0, cost1, q, fit)
-    reading = _final_parameters(cand, model).parameters
-    plausible = effect.is_plausible(reading)
+    plausible = effect.is_plausible(_final_parameters(cand, model).parameters)
     # a physical nuisance (a Stribeck velocity, a width) that the fit pushed to the edge of what the record shows
     # is not estimated by it: the effect stands in for another there (a smoothing velocity is numerical: its edge
     # is only the sharpest switch the record resolves)
-    edge = (own is not None and effect.nuisance != "smoothing_velocity" and
-            (nuis[-1].at_bound(-1.0) or nuis[-1].at_bound(1.0))) or _delay_below_span(effect, placed, screen, reading)
+    edge = own is not None and effect.nuisance != "smoothing_velocity" and \
+        (nuis[-1].at_bound(-1.0) or nuis[-1].at_bound(1.0))
     shows = bool(p_value < alpha and delta_bic < -bic_margin and size >= min_size and plausible)
     # (one at the edge is not claimed, but it is a reading the data fit: a rival of the effect named, not proof
     # of it, :func:`~cosim.diagnose.ambiguity.converged_rival`)
@@ -257,22 +256,6 @@ def _fit_with(current: IdentifiedModel, cand: EffectCandidate, columns: dict[str
                               "nuisance_at_bound": edge, "rival_only": shows and edge},
                    significant=shows and not edge)
     return _Trial(cand, model, nuis, own, new_cols)
-
-
-def _delay_below_span(effect: Effect, placed: Attachment, screen: OutputErrorScreen,
-                      reading: Mapping[str, float]) -> bool:
-    """Whether a delay's reading (the centroid of its taps) lies below the span the record shows, one sample.
-
-    A delay is fitted on whole-sample taps beside the undelayed input's own gain; when that gain keeps most of
-    the weight the centroid falls under a sample (0.02 and 0.45 samples on records 190 and 64 of the
-    generalisation benchmark, a viscous asymmetry and a Stribeck friction there). What is fitted is then a
-    filter of the input between its samples, which the record does not show (how the actuator holds its input
-    between samples is the model's assumption), not a transport delay: the reading is at its span's edge, like
-    a physical nuisance the fit pushed to its bound."""
-    if effect.name != "delay" or "delay_samples" not in reading:
-        return False
-    span = effect.nuisance_span(placed, screen.free_run, screen.band)
-    return span is not None and reading["delay_samples"] < span[0]
 
 
 def _evidence(screen: OutputErrorScreen, fuller: IdentifiedModel, cols: Mapping[str, np.ndarray], dt: float,
