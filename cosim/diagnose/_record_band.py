@@ -62,6 +62,9 @@ MIN_SHARE = 0.05
 #: Longest delay, as a share of the record's samples, and in samples.
 DELAY_SHARE = 0.02
 DELAY_MAX = 200
+#: Shortest delay, in samples: a reading under it (the taps' centroid, when the undelayed input keeps most of
+#: the gain) is a filter of the input between its samples, which a sampled record does not show, not a delay.
+DELAY_MIN = 1.0
 #: Ratio between neighbouring values of a logarithmic grid.
 LOG_STEP = 10 ** 0.5
 
@@ -323,7 +326,7 @@ def smoothing_span(velocity: np.ndarray, band: RecordBand, name: str) -> tuple[f
 
 def delay_span(band: RecordBand) -> tuple[float, float] | None:
     top = min(DELAY_MAX, math.floor(DELAY_SHARE * band.samples))
-    return (1.0, float(top)) if top >= 1 else None
+    return (DELAY_MIN, float(top)) if top >= DELAY_MIN else None
 
 
 def delay_grid(lo: float, hi: float) -> list[float]:

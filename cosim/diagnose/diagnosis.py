@@ -295,6 +295,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     fit = _FitOptions(estimate_x0=start is None, noise=checked_noise(model, noise), segments=segments,
                       measured=measured_states(model, given, noise))
     given_fit = replace(fit, segments=given_starts if segments is not None else None)
+    fit = replace(fit, record_rate=factor == 1)
     if factor > 1:  # the noise levels of the records as given, less what the decimation's filter took off
         fit = replace(fit, noise=dict(zip(model.states, (_sigma(model, given_columns, given_fit) *
                                                          math.sqrt(noise_gain(factor))).tolist(), strict=True)))
