@@ -309,3 +309,21 @@ def test_a_delay_under_one_sample_is_not_claimed(tmp_path):
     payload = json.loads(result.stdout)
     assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("viscous_asymmetry", "omega_m")], \
         payload["message"]
+
+
+@pytest.mark.slow
+def test_a_backlash_that_stiffens_the_coupling_is_not_claimed(tmp_path):
+    """Record 71: a two-mass plant with an offset and an input saturation, positions measured. A backlash on the
+    twist used to be named alone, its clip term adding stiffness inside the gap (stiffness ratio -0.25, where a
+    gap takes the coupling's force away: 1). Such a reading is not a backlash: it is not plausible, and no
+    backlash is named."""
+    import bench_diagnosis_generalization as bench
+
+    folder = bench.prepare(71, tmp_path, 4000)
+    truth = json.loads((folder / "truth.json").read_text())
+    assert {e["name"] for e in truth["spec"]["effects"]} == {"offset", "saturation"}
+    argv = bench.commands(folder, truth["cli"], "cosim")["a"][0]
+    result = CliRunner().invoke(main, argv[1:])
+    assert result.exit_code == 0, result.output
+    payload = json.loads(result.stdout)
+    assert "backlash" not in {e["name"] for e in payload["effects"]}, payload["message"]

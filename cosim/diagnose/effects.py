@@ -568,7 +568,9 @@ register_effect(Effect(
 register_effect(Effect(
     "backlash", "backlash: a dead band in the coupling between two positions (no force inside the gap)",
     "pair", "half_width", "twist", lambda a, v: (_clip(f"({a.signals[0]}-{a.signals[1]})", v),), _backlash_params,
-    grid_fractions=(0.02, 0.05, 0.1, 0.2, 0.4)))
+    # a gap takes the coupling's force away: stiffness ratio > 0 in each row (-0.25, stiffer at zero twist: no gap)
+    grid_fractions=(0.02, 0.05, 0.1, 0.2, 0.4), plausible=lambda p: all(
+        v > 0.0 for k, v in p.items() if k.startswith("stiffness_ratio_"))))
 register_effect(Effect(
     "deadzone", "dead zone on an input: small commands have no effect", "input", "width", "input",
     lambda a, v: (_clip(a.signals[0], v),), _input_level_params("width"),
