@@ -93,6 +93,7 @@ from ._trials import (
     _remove_effect,
     _retest_base,
     _sigma,
+    polished,
 )
 from .ambiguity import check_plant, converged_rival, settled
 from .candidates import EffectCandidate, registered
@@ -168,8 +169,7 @@ def _columns(model: IdentifiedModel, records: Sequence[Trajectory]) -> tuple[dic
 
 def _initial_state(model: IdentifiedModel, records: Sequence[Trajectory],
                    x0: str | Sequence[float]) -> np.ndarray | None:
-    """The held initial state(s) of `diagnose`'s `x0` (None: estimated): (n,) for one record, (records, n) for
-    several."""
+    """The held initial state(s) of `diagnose`'s `x0` (None: estimated): (n,) for one record, else (records, n)."""
     if isinstance(x0, str):
         if x0 not in ("estimate", "measured"):
             raise InvalidSettingError(f'x0 must be "estimate", "measured" or {len(model.states)} values, got {x0!r}')
@@ -260,8 +260,7 @@ def diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *,
     -------
     DiagnosisReport
     """
-    # the work is tall, thin least squares and small matrix products: threaded BLAS only adds overhead
-    # (3x slower on 2 cores)
+    # the work is tall, thin least squares and small matrix products: threaded BLAS is 3x slower on 2 cores
     if plant is not None:
         check_plant(plant, (*model.states, *model.inputs))  # (before the search)
     with registered(candidates, effects) as effects, threadpool_limits(limits=1, user_api="blas"):
@@ -425,6 +424,10 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     if without is not None:
         res_before = residuals(without, given[0], x0=_first_x0(_fitted_x0(without, segments)))
         before = _figures_of(without, truth, res_before, None, refitted=without)
+    if accepted:
+        current, nuisances = polished(current, nuisances, columns, given[0].dt, given_fit)
+        _write_back(accepted, owners, nuisances)
+        steps[-1:] = [(steps[-1][0], current)] if steps else []  # (the last step's model is the polished one)
     first = given[0]
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
     final = stable_if_free(current, columns, starts, first.dt) if accepted else current
@@ -485,8 +488,7 @@ def _offset_rival(offset: tuple, names: Sequence[str], accepted: Sequence[Effect
     (`offset`'s third item); the best (ordered as the rounds order, gravity before a softening spring it ties
     with) that beats the model with the offset by BIC (on the actual costs) and passes the held-out check is
     named instead; one within :data:`~._ranking.TIE_BIC` of it is the constant read another way (a dead zone
-    under an input that is zero only at rest), and the constant stays.
-    """
+    under an input that is zero only at rest), and the constant stays."""
     cand, with_offset, reduced = offset
     try:
         screen = OutputErrorScreen(reduced, dict(columns), dt, **fit.kw)
