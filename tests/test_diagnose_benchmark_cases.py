@@ -104,6 +104,19 @@ def _diagnose(index: int, folder: Path, *options: str, shown_only: bool = True, 
     return record.spec, json.loads(result.stdout)
 
 
+def _bench_default_path(index: int, folder: Path) -> tuple[Path, dict, dict]:
+    """Record `index` as the generalisation benchmark prepares it (4000 samples) and its default path (a) run
+    on it: the record's folder, its truth.json and ``cosim diagnose``'s JSON."""
+    import bench_diagnosis_generalization as bench
+
+    record = bench.prepare(index, folder, 4000)
+    truth = json.loads((record / "truth.json").read_text())
+    argv = bench.commands(record, truth["cli"], "cosim")["a"][0]
+    result = CliRunner().invoke(main, argv[1:])
+    assert result.exit_code == 0, result.output
+    return record, truth, json.loads(result.stdout)
+
+
 @pytest.mark.slow
 def test_stribeck_named_with_its_velocity_scale(tmp_path):
     spec, payload = _diagnose(113, tmp_path)
@@ -262,15 +275,9 @@ def test_a_base_term_goes_only_when_its_refit_pays_in_bic(tmp_path):
     by the refit's BIC, the model keeps what it needs: 23 %, against 5700 % for the linear base."""
     import bench_diagnosis_generalization as bench
 
-    folder = bench.prepare(90, tmp_path, 4000)
-    truth = json.loads((folder / "truth.json").read_text())
-    spec, cli = truth["spec"], truth["cli"]
-    argv = bench.commands(folder, cli, "cosim")["a"][0]
-    result = CliRunner().invoke(main, argv[1:])
-    assert result.exit_code == 0, result.output
-    payload = json.loads(result.stdout)
+    folder, truth, payload = _bench_default_path(90, tmp_path)
     assert [e["name"] for e in payload["effects"]] == ["stribeck"], payload["message"]
-    assert bench.heldout_nrmse(folder / "model_after_a.json", folder, spec, cli) < 35.0
+    assert bench.heldout_nrmse(folder / "model_after_a.json", folder, truth["spec"], truth["cli"]) < 35.0
 
 
 @pytest.mark.slow
@@ -298,15 +305,8 @@ def test_a_delay_under_one_sample_is_not_claimed(tmp_path):
     (its taps' centroid, the undelayed input keeping 98 % of the gain) used to be named first, then the
     asymmetry. A delay under one sample lies below the span the record shows (an input filter between samples,
     not a transport delay): it is not a plausible delay, and the asymmetry is named alone."""
-    import bench_diagnosis_generalization as bench
-
-    folder = bench.prepare(190, tmp_path, 4000)
-    truth = json.loads((folder / "truth.json").read_text())
+    _, truth, payload = _bench_default_path(190, tmp_path)
     assert [e["name"] for e in truth["spec"]["effects"]] == ["viscous_asymmetry"]
-    argv = bench.commands(folder, truth["cli"], "cosim")["a"][0]
-    result = CliRunner().invoke(main, argv[1:])
-    assert result.exit_code == 0, result.output
-    payload = json.loads(result.stdout)
     assert [(e["name"], e["attached_to"]) for e in payload["effects"]] == [("viscous_asymmetry", "omega_m")], \
         payload["message"]
 
@@ -317,13 +317,6 @@ def test_a_backlash_that_stiffens_the_coupling_is_not_claimed(tmp_path):
     twist used to be named alone, its clip term adding stiffness inside the gap (stiffness ratio -0.25, where a
     gap takes the coupling's force away: 1). Such a reading is not a backlash: it is not plausible, and no
     backlash is named."""
-    import bench_diagnosis_generalization as bench
-
-    folder = bench.prepare(71, tmp_path, 4000)
-    truth = json.loads((folder / "truth.json").read_text())
+    _, truth, payload = _bench_default_path(71, tmp_path)
     assert {e["name"] for e in truth["spec"]["effects"]} == {"offset", "saturation"}
-    argv = bench.commands(folder, truth["cli"], "cosim")["a"][0]
-    result = CliRunner().invoke(main, argv[1:])
-    assert result.exit_code == 0, result.output
-    payload = json.loads(result.stdout)
     assert "backlash" not in {e["name"] for e in payload["effects"]}, payload["message"]
