@@ -309,6 +309,12 @@ def test_duffing_positions_only_default_cli_path_names_the_cubic_spring(tmp_path
     found = payload["effects"][0]
     assert (found["name"], found["attached_to"]) == ("cubic_stiffness", "x"), payload["message"]
     assert found["parameters"]["k3"] == pytest.approx(K3, rel=0.10)
+    # the headline error is the measured position's (what the search fitted), not a mean with its derivative
+    for figures in (payload["before"], payload["after"]):
+        assert figures["states"] == ["x"]
+        assert figures["nrmse_pct"] == pytest.approx(figures["per_state"]["x"]["nrmse_pct"])
+    assert "of the measured states (x)" in payload["message"]
+    assert payload["after"]["nrmse_pct"] < payload["before"]["nrmse_pct"]
 
 
 # ---------------------------------------------------------------------------------------------- saturation on steps

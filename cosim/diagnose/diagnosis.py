@@ -303,7 +303,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     current = output_error_fit(model, columns, first.dt, x0=start, **fit.kw)[0]
     res_before = residuals(model, given[0], x0="estimate" if start is None else _first_x0(start))
     truth = [reference] if reference is not None else given
-    before = _figures_of(model, truth, res_before, start, refitted=None)
+    before = _figures_of(model, truth, res_before, start, refitted=None, measured=fit.measured)
     sigma = dict(zip(model.states, _sigma(model, columns, fit).tolist(), strict=True))
     check = HeldOutCheck(columns, starts, first.dt, sigma, fit.estimate_x0, fit.measured) if held_out else None
     if check is not None and not check.possible:
@@ -423,7 +423,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         columns, starts = given_columns, given_starts
     if without is not None:
         res_before = residuals(without, given[0], x0=_first_x0(_fitted_x0(without, segments)))
-        before = _figures_of(without, truth, res_before, None, refitted=without)
+        before = _figures_of(without, truth, res_before, None, refitted=without, measured=fit.measured)
     if accepted:
         current, nuisances = polished(current, nuisances, columns, given[0].dt, given_fit)
         _write_back(accepted, owners, nuisances)
@@ -433,7 +433,8 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     final = stable_if_free(current, columns, starts, first.dt) if accepted else current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
     after = _figures_of(final, [_with_columns(r, _record_columns(columns, starts, k, r)) for k, r in
-                                enumerate(truth)], res_after, None, refitted=final) if accepted else before
+                                enumerate(truth)], res_after, None, refitted=final, measured=fit.measured) \
+        if accepted else before
     found = tuple(_final_parameters(c, final) for c in accepted)
     message = _message(found, before, after, res_before, rejected)
     return DiagnosisReport(effects=found, ranking=rounds[0] if rounds else (), rounds=tuple(rounds),
@@ -567,9 +568,11 @@ def _record_columns(columns: Mapping[str, np.ndarray], starts: Sequence[int], k:
 
 
 def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: ResidualAnalysis,
-                start: np.ndarray | None, refitted: IdentifiedModel | None) -> dict[str, Any]:
+                start: np.ndarray | None, refitted: IdentifiedModel | None,
+                measured: Sequence[str] | None = None) -> dict[str, Any]:
     """The free-run figures of `model` on one record, or pooled over several (weighted by their lengths, each
-    from its own initial state; per record under ``per_record``)."""
+    from its own initial state; per record under ``per_record``); the summary figures are means over the
+    `measured` states (None: all)."""
     fitted = refitted if refitted is not None else model
     x0s = fitted.meta.get("x0") if isinstance(fitted.meta, Mapping) else None
     held = None if start is None else np.atleast_2d(start)
@@ -581,7 +584,7 @@ def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: Resi
             x0 = np.asarray(x0s[k], dtype=float)
         else:  # the model's own initial state on the first record, each other record's first sample
             x0 = None if k == 0 else np.array([record[s][0] for s in model.states], dtype=float)
-        per.append(_figures(model, record, res, x0))
+        per.append(_figures(model, record, res, x0, measured))
     if len(per) == 1:
         return per[0]
     weights = np.array([len(r) for r in records], dtype=float)
@@ -590,7 +593,7 @@ def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: Resi
     for key in ("r2", "nrmse_pct", "max_dev_pct"):
         values = [p[key] for p in per]
         pooled[key] = None if any(v is None for v in values) else float(np.average(values, weights=weights))
-    pooled["per_state"] = per[0]["per_state"]
+    pooled["per_state"], pooled["states"] = per[0]["per_state"], per[0].get("states")
     return pooled
 
 

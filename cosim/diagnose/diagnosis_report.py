@@ -268,7 +268,8 @@ class DiagnosisReport:
                     + f"{len(model.states)} states ({', '.join(model.states)}), inputs {', '.join(model.inputs)}, "
                     f"{int(np.count_nonzero(model.coef))} terms")]
         errors = {label: {**{k: v["nrmse_pct"] for k, v in figures.get("per_state", {}).items()},
-                          "mean": figures.get("nrmse_pct")} for label, figures in (("before", self.before),
+                          "mean" if not self._states_note().startswith("measured") else "mean of the measured":
+                          figures.get("nrmse_pct")} for label, figures in (("before", self.before),
                                                                                    ("after", self.after))}
         more = []
         if self.rejected:
@@ -281,6 +282,11 @@ class DiagnosisReport:
                 "no_effect": self.message.removeprefix("no effect found: "), "errors": errors,
                 "error_label": f"free-run NRMSE, % of each state's spread, against {against} (lower is better)",
                 "more": more, "seconds": seconds}
+
+    def _states_note(self) -> str:
+        """Which states the summary figures are means over: the measured ones (not a derived velocity)."""
+        states, every = self.after.get("states"), self.model_before.states
+        return f"measured states ({', '.join(states)})" if states and len(states) < len(every) else "states"
 
     def _rate_note(self) -> str:
         """A caption's note of the step the search ran at, when it is not the record's ("" otherwise)."""
@@ -320,7 +326,7 @@ class DiagnosisReport:
         report.add_table("Error before and after", [
             {"": "before", **{k: self.before[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}},
             {"": "after", **{k: self.after[k] for k in ("r2", "nrmse_pct", "max_dev_pct", "white")}}],
-            caption="free-run simulation against the data; means over the states" + self._rate_note())
+            caption="free-run simulation against the data; means over the " + self._states_note() + self._rate_note())
         if self.rejected:
             report.add_table("Rejected: better in-sample, not on held-out data (or refitted out of range)", [
                 {"effect": c.name, "attached to": c.attached_to,
@@ -438,7 +444,10 @@ def _free_run(model: IdentifiedModel, data: Trajectory) -> Trajectory | None:
 
 
 def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
-             x0: np.ndarray | None = None) -> dict[str, Any]:
+             x0: np.ndarray | None = None, measured: Sequence[str] | None = None) -> dict[str, Any]:
+    """The free-run figures of `model` on `data`: per state, and their means over the `measured` states (None:
+    all), the ones the diagnosis fitted: a velocity derived from a measured position is reported per state but
+    is no measurement (a model that follows the positions better may follow their smoothed derivative worse)."""
     truth = np.column_stack([data[name] for name in model.states])
     u = np.column_stack([data[n] for n in model.inputs]) if model.inputs else np.zeros((len(data), 0))
     sim = model.simulate(_x0(model, data) if x0 is None else x0, u[:-1], dt=data.dt)
@@ -450,16 +459,22 @@ def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
     dev = np.atleast_1d(max_deviation_pct(truth, sim.states))
     per_state = {name: {"r2": float(rr[i]), "nrmse_pct": float(100.0 - fit[i]), "fit_pct": float(fit[i]),
                         "max_dev_pct": float(dev[i])} for i, name in enumerate(model.states)}
-    return {"r2": float(np.mean(rr)), "nrmse_pct": float(np.mean(100.0 - fit)), "max_dev_pct": float(np.mean(dev)),
-            "white": bool(res.white), "status": sim.status, "per_state": per_state}
+    counted = [i for i, name in enumerate(model.states) if measured is None or name in measured] or \
+        list(range(len(model.states)))
+    return {"r2": float(np.mean(rr[counted])), "nrmse_pct": float(np.mean(100.0 - fit[counted])),
+            "max_dev_pct": float(np.mean(dev[counted])), "white": bool(res.white), "status": sim.status,
+            "per_state": per_state, "states": [model.states[i] for i in counted]}
 
 
 def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after: Mapping[str, Any],
              res_before: ResidualAnalysis, rejected: Sequence[EffectCandidate]) -> str:
     """The report's one sentence."""
     if found:
+        states = after.get("states")
+        of = f" of the measured states ({', '.join(states)})" if states and len(states) < len(after.get(
+            "per_state") or states) else ""
         return "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
-            f": free-run NRMSE {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
+            f": free-run NRMSE{of} {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
     odd = [c for c in rejected if c.explained.get("plausible", True) is False]
     # (an effect that beat noise on held-out data, with a model that still predicts them no better than their mean)
     poor = [c for c in rejected if c not in odd and c.explained.get("held_out_t", -math.inf) >= HELD_OUT_T
