@@ -433,8 +433,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
     final = stable_if_free(current, columns, starts, first.dt) if accepted else current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
     after = _figures_of(final, [_with_columns(r, _record_columns(columns, starts, k, r)) for k, r in
-                                enumerate(truth)], res_after, None, refitted=final, measured=fit.measured) \
-        if accepted else before
+                                enumerate(truth)], res_after, None, final, fit.measured) if accepted else before
     found = tuple(_final_parameters(c, final) for c in accepted)
     message = _message(found, before, after, res_before, rejected)
     return DiagnosisReport(effects=found, ranking=rounds[0] if rounds else (), rounds=tuple(rounds),
@@ -567,12 +566,10 @@ def _record_columns(columns: Mapping[str, np.ndarray], starts: Sequence[int], k:
     return {name: v[a:a + len(record)] for name, v in columns.items()}
 
 
-def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: ResidualAnalysis,
-                start: np.ndarray | None, refitted: IdentifiedModel | None,
-                measured: Sequence[str] | None = None) -> dict[str, Any]:
+def _figures_of(model: IdentifiedModel, records: Sequence[Trajectory], res: ResidualAnalysis, start: np.ndarray | None,
+                refitted: IdentifiedModel | None, measured: Sequence[str] | None = None) -> dict[str, Any]:
     """The free-run figures of `model` on one record, or pooled over several (weighted by their lengths, each
-    from its own initial state; per record under ``per_record``); the summary figures are means over the
-    `measured` states (None: all)."""
+    from its own initial state; per record under ``per_record``), as means over the `measured` states (None: all)."""
     fitted = refitted if refitted is not None else model
     x0s = fitted.meta.get("x0") if isinstance(fitted.meta, Mapping) else None
     held = None if start is None else np.atleast_2d(start)
