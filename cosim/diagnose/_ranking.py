@@ -31,6 +31,7 @@ from ._record_band import RecordBand
 from .candidates import EffectCandidate, _uncertainty
 from .effects import EFFECTS, Attachment, Effect, EffectSelection, Roles, effect_selection
 from .screening import OutputErrorScreen, effect_specs, noise_level
+from .user_candidates import UserEffect
 
 
 def _candidate(effect: Effect, attachment: Attachment, value: float | None, terms: tuple[str, ...],
@@ -195,7 +196,15 @@ def _round(screen: OutputErrorScreen, names: Sequence[str] | EffectSelection, al
     ranking[:refine_top] = [c if c.name in selection.fixed or "at_edge" in c.explained
                             else _refine(screen, c, alpha, bic_margin, min_size, band) for c in ranking[:refine_top]]
     ranking.sort(key=lambda c: c.delta_bic)
-    return ranking
+    return _one_reading_each(ranking)
+
+
+def _one_reading_each(ranking: list[EffectCandidate]) -> list[EffectCandidate]:
+    """`ranking` without a catalogue candidate that a user's candidate repeats term for term (the same features in
+    the same rows: one model, one fit, not two readings the data cannot tell apart): the reading keeps the name
+    the user gave it."""
+    brought = {(c.terms, c.rows) for c in ranking if isinstance(EFFECTS[c.name], UserEffect)}
+    return [c for c in ranking if isinstance(EFFECTS[c.name], UserEffect) or (c.terms, c.rows) not in brought]
 
 
 # ---------------------------------------------------------------------------------------------- fixed values
