@@ -267,10 +267,10 @@ class DiagnosisReport:
         context = [("Model", (f"{model_from}: " if model_from else "")
                     + f"{len(model.states)} states ({', '.join(model.states)}), inputs {', '.join(model.inputs)}, "
                     f"{int(np.count_nonzero(model.coef))} terms")]
+        mean = "mean of the measured" if _measured_of(self.after) else "mean"
         errors = {label: {**{k: v["nrmse_pct"] for k, v in figures.get("per_state", {}).items()},
-                          "mean" if not self._states_note().startswith("measured") else "mean of the measured":
-                          figures.get("nrmse_pct")} for label, figures in (("before", self.before),
-                                                                                   ("after", self.after))}
+                          mean: figures.get("nrmse_pct")} for label, figures in (("before", self.before),
+                                                                                 ("after", self.after))}
         more = []
         if self.rejected:
             more.append(("Not claimed", "; ".join(f"{c.name} on {c.attached_to}" for c in self.rejected)
@@ -285,8 +285,8 @@ class DiagnosisReport:
 
     def _states_note(self) -> str:
         """Which states the summary figures are means over: the measured ones (not a derived velocity)."""
-        states, every = self.after.get("states"), self.model_before.states
-        return f"measured states ({', '.join(states)})" if states and len(states) < len(every) else "states"
+        states = _measured_of(self.after)
+        return f"measured states ({', '.join(states)})" if states else "states"
 
     def _rate_note(self) -> str:
         """A caption's note of the step the search ran at, when it is not the record's ("" otherwise)."""
@@ -466,13 +466,19 @@ def _figures(model: IdentifiedModel, data: Trajectory, res: ResidualAnalysis,
             "per_state": per_state, "states": [model.states[i] for i in counted]}
 
 
+def _measured_of(figures: Mapping[str, Any]) -> list[str] | None:
+    """The states `figures`' means are over (:func:`_figures`' ``states``) where they leave some out (a velocity
+    derived from a measured position); None where they are over every state."""
+    states = figures.get("states")
+    return list(states) if states and len(states) < len(figures.get("per_state") or states) else None
+
+
 def _message(found: Sequence[EffectCandidate], before: Mapping[str, Any], after: Mapping[str, Any],
              res_before: ResidualAnalysis, rejected: Sequence[EffectCandidate]) -> str:
     """The report's one sentence."""
     if found:
-        states = after.get("states")
-        of = f" of the measured states ({', '.join(states)})" if states and len(states) < len(after.get(
-            "per_state") or states) else ""
+        states = _measured_of(after)
+        of = f" of the measured states ({', '.join(states)})" if states else ""
         return "found " + ", then ".join(f"{e.name} on {e.attached_to}" for e in found) + \
             f": free-run NRMSE{of} {before['nrmse_pct']:.3g} % -> {after['nrmse_pct']:.3g} %"
     odd = [c for c in rejected if c.explained.get("plausible", True) is False]
