@@ -157,3 +157,51 @@ def test_the_cli_candidate_is_searched_and_reported(tmp_path):
     first = payload["effects"][0]
     assert (first["name"], first["attached_to"]) == ("orifice", "h1"), payload["message"]
     assert first["parameters"]["a"] == pytest.approx(a1 / A1, rel=0.05)
+
+
+def test_a_diagnosis_brings_its_candidates_for_its_own_thread_only():
+    """Two diagnoses in threads of one process (Dask's threaded scheduler): each sees its own candidates in the
+    catalogue, not the other's, and one finishing does not take a shared candidate from the other (they were put
+    in the process-wide catalogue and taken out again: the other's search then failed half-way)."""
+    import threading
+
+    from cosim.diagnose.candidates import registered
+    from cosim.diagnose.effects import EFFECTS
+
+    orifice, leak = candidate(ORIFICE), candidate("leak: -b*h2", signals=SIGNALS)
+    inside, b_done = threading.Barrier(2), threading.Event()
+    seen: dict[str, object] = {}
+
+    def first():  # holds the orifice while the other thread comes and goes
+        with registered([orifice], "offset"):
+            inside.wait(timeout=30)
+            b_done.wait(timeout=30)
+            seen["a after b"] = EFFECTS.get("orifice")
+
+    def second():  # brings the same orifice and a leak of its own
+        with registered([orifice, leak], "offset") as names:
+            inside.wait(timeout=30)
+            seen["b"] = (names, EFFECTS.get("orifice"), EFFECTS.get("leak"))
+        seen["b after"] = ("orifice" in EFFECTS, "leak" in EFFECTS)
+        b_done.set()
+
+    errors: list[BaseException] = []
+
+    def caught(work):
+        try:
+            work()
+        except BaseException as error:  # (a thread's failure would otherwise show only as a missing key)
+            errors.append(error)
+            inside.abort()
+            b_done.set()
+
+    threads = [threading.Thread(target=caught, args=(work,)) for work in (first, second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert not errors, errors
+    assert seen["b"] == (["offset", "orifice", "leak"], orifice, leak)
+    assert seen["b after"] == (False, False)
+    assert seen["a after b"] is orifice  # still there for the first diagnosis
+    assert "orifice" not in EFFECTS and "leak" not in EFFECTS  # and in neither once both are over

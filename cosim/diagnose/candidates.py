@@ -127,8 +127,8 @@ def _uncertainty(effect: Effect, coef: dict, cov: np.ndarray, value: float | Non
 @contextmanager
 def registered(candidates: Sequence[Effect], effects: Any) -> Iterator[Any]:
     """The effects a user brings (`candidates`, :func:`~cosim.diagnose.user_candidates.candidate`) in the catalogue
-    for the duration of one diagnosis (the search looks effects up by name), and the selection `effects` with
-    their names added."""
+    for the duration of one diagnosis (the search looks effects up by name), in its own thread or task only, and
+    the selection `effects` with their names added."""
     for c in candidates:  # an Effect of its own name (given twice, or already registered, is the same one)
         if not isinstance(c, Effect) or EFFECTS.get(c.name, c) is not c:
             raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
@@ -136,10 +136,5 @@ def registered(candidates: Sequence[Effect], effects: Any) -> Iterator[Any]:
     extra = list({c.name: c for c in candidates if c.name not in EFFECTS}.values())
     if extra:
         effects = [*effect_names(effects), *(c.name for c in extra)]
-    try:
-        for c in extra:
-            EFFECTS[c.name] = c
+    with EFFECTS.brought({c.name: c for c in extra}):  # (this diagnosis' thread or task only)
         yield effects
-    finally:
-        for c in extra:
-            EFFECTS.pop(c.name, None)

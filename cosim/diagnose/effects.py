@@ -47,6 +47,7 @@ import numpy as np
 from ..errors import InvalidSettingError, UnknownVariableError
 from ..identify.model import IdentifiedModel
 from . import _record_band as rb
+from ._catalogue import Catalogue
 from ._record_band import RecordBand
 
 __all__ = ["ALIASES", "EFFECTS", "Attachment", "Effect", "EffectSelection", "RecordBand", "Roles", "effect_selection",
@@ -334,9 +335,8 @@ def delayed_source(name: str) -> str | None:
     return head if sep and head and tail.isdigit() else None
 
 
-EFFECTS: dict[str, Effect] = {}
-#: Other names of catalogued effects in a selection (:func:`effect_selection`).
-ALIASES: dict[str, str] = {"overflow": "hard_stop"}
+EFFECTS: Catalogue[Effect] = Catalogue()  # (a user's candidates: per diagnosis, see ._catalogue)
+ALIASES: dict[str, str] = {"overflow": "hard_stop"}  #: other names of effects in a selection
 
 
 def register_effect(effect: Effect) -> Effect:
