@@ -161,8 +161,9 @@ def test_the_cli_candidate_is_searched_and_reported(tmp_path):
 
 def test_a_diagnosis_brings_its_candidates_for_its_own_thread_only():
     """Two diagnoses in threads of one process (Dask's threaded scheduler): each sees its own candidates in the
-    catalogue, not the other's, and one finishing does not take a shared candidate from the other (they were put
-    in the process-wide catalogue and taken out again: the other's search then failed half-way)."""
+    catalogue, not the other's, and one finishing does not take a shared candidate from the other. (They were put
+    in the process-wide catalogue for a diagnosis' duration: the second to bring the orifice left it out of its
+    own selection, since it was there already.)"""
     import threading
 
     from cosim.diagnose.candidates import registered

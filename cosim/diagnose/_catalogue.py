@@ -3,8 +3,8 @@
 The search looks effects up by name (``EFFECTS[name]``) in many places. A user's candidates
 (:func:`~cosim.diagnose.user_candidates.candidate`) belong to the one diagnosis they were given to, and were once
 put into the process-wide dict for its duration: two diagnoses in threads of one process (Dask's threaded
-scheduler, a thread pool) then saw each other's candidates, and the first to finish took a shared candidate out
-from under the other (a ``KeyError`` half-way through its search). Here they live in a context variable
+scheduler, a thread pool) then saw each other's candidates, and the one that brought a shared candidate second
+left it out of its own search (it was in the catalogue already). Here they live in a context variable
 (:mod:`contextvars`): each thread sees its own, and so does each asyncio task (it runs in a copy of its
 context).
 
