@@ -133,8 +133,8 @@ def registered(candidates: Sequence[Effect], effects: Any) -> Iterator[Any]:
         if not isinstance(c, Effect) or EFFECTS.get(c.name, c) is not c:
             raise InvalidSettingError(f"candidate {getattr(c, 'name', c)!r} is not an Effect with a new name; "
                                       "build it with cosim.diagnose.candidate(...)")
-    extra = list({c.name: c for c in candidates if c.name not in EFFECTS}.values())
+    extra = {c.name: c for c in candidates if c.name not in EFFECTS}
     if extra:
-        effects = [*effect_names(effects), *(c.name for c in extra)]
-    with EFFECTS.brought({c.name: c for c in extra}):  # (this diagnosis' thread or task only)
+        effects = [*effect_names(effects), *extra]
+    with EFFECTS.brought(extra):  # (this diagnosis' thread or task only)
         yield effects
