@@ -83,9 +83,12 @@ def read_records(paths: Sequence[str], *, states: Sequence[str], inputs: Sequenc
                          roles={**dict.fromkeys((n for n in state_names if n not in derive), "state"),
                                 **dict.fromkeys(input_names, "input")})
         if any(old != new for old, new in rename.items()):
+            meta = dict(data.meta)  # the velocities under their given names (cosim.data.derived_velocities)
+            meta["data_file"] = {**meta["data_file"], "derivatives": {**meta["data_file"]["derivatives"],
+                                                                     "velocities": dict(derive)}}
             data = Trajectory.from_arrays(data.time, {rename.get(n, n): data[n] for n in data.names},
                                           units={rename.get(n, n): data.units[i] for i, n in enumerate(data.names)},
-                                          meta=data.meta)
+                                          meta=meta)
         wanted = [*state_names, *input_names] if differentiate else [
             *[n for n in state_names if n not in derive], *sources, *input_names]
         data = data.select(list(dict.fromkeys(wanted)))

@@ -100,7 +100,7 @@ from .trajectory import Trajectory
 
 # differentiate and DERIVATIVE_METHODS live in cosim.data.derivatives; they import from here too
 __all__ = ["load_data", "differentiate", "check_excitation", "file_variables", "time_column", "DERIVATIVE_METHODS",
-           "MIN_SAMPLES", "UNIFORM_RTOL"]
+           "MIN_SAMPLES", "UNIFORM_RTOL", "derived_velocities"]
 
 #: Fewest samples a record may have: two give a time step, three a central difference.
 MIN_SAMPLES = 3
@@ -108,6 +108,33 @@ MIN_SAMPLES = 3
 UNIFORM_RTOL = 1e-3
 
 _SUFFIXES = MappingProxyType({".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mat": "mat"})
+
+
+def derived_velocities(record: Trajectory) -> dict[str, str]:
+    """The velocities :func:`load_data` derived from a measured position (``derive=``), velocity -> position:
+    ``POS_dot`` for each position, or the names a caller gave them (``meta["data_file"]["derivatives"]
+    ["velocities"]``, as ``cosim``'s ``--derive VEL=POS`` records them). Empty for a record that derived none.
+
+    A derived velocity is the output of a smoothing differentiator, not a measurement: fits of the plant's
+    free run leave it out of their cost.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cosim.data.trajectory import Trajectory
+    >>> t = np.arange(5) * 0.1
+    >>> traj = Trajectory.from_arrays(t, {"x": t, "x_dot": np.ones(5)},
+    ...                               meta={"data_file": {"derivatives": {"of": ["x"]}}})
+    >>> derived_velocities(traj)
+    {'x_dot': 'x'}
+    """
+    meta = record.meta if isinstance(record.meta, Mapping) else {}
+    info = meta.get("data_file") if isinstance(meta.get("data_file"), Mapping) else {}
+    derivatives = info.get("derivatives") if isinstance(info.get("derivatives"), Mapping) else {}
+    named = derivatives.get("velocities")
+    if isinstance(named, Mapping):
+        return {str(v): str(p) for v, p in named.items()}
+    return {f"{p}_dot": str(p) for p in derivatives.get("of") or ()}
 
 
 # ------------------------------------------------------------------------------------------------ excitation

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..data.datafile import derived_velocities
 from ..data.trajectory import Trajectory
 from ..errors import InvalidSettingError
 from ..identify.model import IdentifiedModel
@@ -177,9 +178,7 @@ def measured_states(model: IdentifiedModel, records: Sequence[Trajectory],
     level is given for one. None when all are measured."""
     derived: set[str] = set()
     for record in records:
-        info = (record.meta or {}).get("data_file", {}) if isinstance(record.meta, Mapping) else {}
-        of = (info.get("derivatives") or {}).get("of", ()) if isinstance(info, Mapping) else ()
-        derived.update(f"{p}_dot" for p in of)
+        derived.update(derived_velocities(record))
     derived -= set(noise or ())
     measured = tuple(s for s in model.states if s not in derived)
     return None if len(measured) == len(model.states) or not measured else measured

@@ -12,7 +12,8 @@ the settings), ``_records`` (records read into arrays), ``_library`` (library te
 ``_differentiation`` (pysindy differentiators), ``_equation_error`` (features and targets), ``_sampler`` (the
 trapezoid or, for forward-Euler samples, the left rectangle), ``_sparse_regression`` (scale-aware STLSQ,
 threshold by BIC), ``_refinement`` (output-error refinement and
-backward elimination), ``_stability`` (stability judgement).
+backward elimination), ``_stability`` (stability judgement); ``_linear_run`` holds the output-error
+refinement's linear free run (a blocked scan).
 
 Imports the data and plant rooms and the foundation.
 """

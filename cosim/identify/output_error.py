@@ -55,6 +55,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import DataError, InvalidSettingError
+from ._linear_run import _expm_batch, _scan, simulate_linear_batch  # (simulate_linear_batch: public here)
 from ._stability import StabilityPenalty
 from .model import DIVERGENCE_LIMIT, IdentifiedModel
 from .terms import FUNCTIONS, Term
@@ -103,94 +104,6 @@ class OutputErrorFit:
     seconds: float = 0.0
 
 
-def _scan(ad: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Solve ``y[0] = s[0], y[k] = ad @ y[k-1] + s[k]`` along axis 0 by a scan in blocks.
-
-    `s` has shape (n+1, ..., n_x); ``ad`` (n_x, n_x) acts on the last axis. The steps are cut into ``B``
-    blocks of ``L ~ sqrt(n)``: every block is run from zero, all blocks at once (``L`` batched products);
-    then the state entering each block, block after block (``B`` small products); then each block's entering
-    state carried through it by the powers of ``ad`` (one product). About ``2 sqrt(n)`` NumPy calls doing
-    ``O(n)`` work, where a prefix scan (``log2 n`` passes over everything, used until 2026-11) did
-    ``O(n log n)``: 2.4 times faster on a 20 000-sample record. The same recursion as
-    :class:`cosim.diagnose._sensitivity.Propagator`'s for a linear model, on this module's layout.
-    """
-    y = np.array(s, dtype=float, copy=True)
-    steps = y.shape[0] - 1
-    if steps <= 0:
-        return y
-    ad = np.asarray(ad, dtype=float)
-    size = max(1, math.isqrt(steps))
-    blocks = -(-steps // size)
-    tail = y.shape[1:]
-    g = np.zeros((blocks * size, *tail))
-    g[:steps] = y[1:]
-    g = g.reshape(blocks, size, *tail)
-    with np.errstate(over="ignore", invalid="ignore"):
-        for j in range(1, size):  # every block from a zero state
-            g[:, j] += g[:, j - 1] @ ad.T
-        powers = np.empty((size, *ad.shape))  # ad^(j+1)
-        powers[0] = ad
-        for j in range(1, size):
-            powers[j] = ad @ powers[j - 1]
-        carry = np.empty((blocks, *tail))  # the state entering each block
-        carry[0] = y[0]
-        for b in range(blocks - 1):
-            carry[b + 1] = carry[b] @ powers[-1].T + g[b, -1]
-        g += np.moveaxis(np.tensordot(carry, powers, axes=([-1], [2])), -2, 1)
-    y[1:] = g.reshape(blocks * size, *tail)[:steps]
-    return y
-
-
-def _expm_batch(m: np.ndarray) -> np.ndarray:
-    """``expm`` of a stack of small matrices (shape (..., q, q)): scaling and squaring of a degree-16 Taylor
-    polynomial, vectorised over the stack (scipy's ``expm`` costs milliseconds per small matrix).
-
-    Each matrix is scaled by ``2^-s`` to a 1-norm of at most 1/4, where the truncation error of the series
-    (``0.25^17/17!``) is below double precision, then squared ``s`` times.
-    """
-    norm = float(np.max(np.sum(np.abs(m), axis=-2))) if m.size else 0.0
-    if not math.isfinite(norm):
-        return np.full_like(m, np.nan)
-    s = max(0, math.ceil(math.log2(norm / 0.25))) if norm > 0.25 else 0
-    a = m / 2.0 ** s
-    eye = np.broadcast_to(np.eye(m.shape[-1]), m.shape)
-    result = eye + a
-    term = a
-    for k in range(2, 17):
-        term = term @ a / k
-        result = result + term
-    for _ in range(s):
-        result = result @ result
-    return result
-
-
-def simulate_linear_batch(ad: np.ndarray, bd: np.ndarray, cd: np.ndarray, x0: np.ndarray,
-                          u: np.ndarray) -> np.ndarray:
-    """Free-run ``x[k+1] = ad x[k] + bd u[k] + cd`` from `x0` for ``len(u)`` steps, without a Python loop.
-
-    Parameters
-    ----------
-    ad, bd, cd : ndarray
-        Discrete-time matrices (see :meth:`IdentifiedModel.discretize`).
-    x0 : ndarray, shape (n_x,)
-    u : ndarray, shape (n, n_u)
-
-    Returns
-    -------
-    ndarray, shape (n+1, n_x)
-        Non-finite where the model diverges.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> simulate_linear_batch(np.array([[0.5]]), np.array([[1.0]]), np.zeros(1), np.array([2.0]),
-    ...                       np.ones((3, 1))).ravel().tolist()
-    [2.0, 2.0, 2.0, 2.0]
-    """
-    s = np.empty((u.shape[0] + 1, ad.shape[0]))
-    s[0] = x0
-    s[1:] = u @ bd.T + cd
-    return _scan(ad, s)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -202,7 +115,7 @@ class _Problem:
 
     def __init__(self, model: IdentifiedModel, runs: Sequence[tuple[np.ndarray, np.ndarray]], dt: float,
                  support: np.ndarray, estimate_x0: bool, x0: Sequence[np.ndarray] | None,
-                 coef_scale: np.ndarray | None):
+                 coef_scale: np.ndarray | None, measured_states: Sequence[bool] | None = None):
         self.model, self.dt = model, dt
         self.n_x, self.n_u = len(model.states), len(model.inputs)
         self.runs = [(np.asarray(x, dtype=float), np.asarray(u, dtype=float).reshape(len(x) - 1, self.n_u))
@@ -214,6 +127,14 @@ class _Problem:
         measured = np.vstack([x for x, _ in self.runs])
         spread = measured.std(axis=0)
         self.scale = np.where(spread > 0, spread, np.maximum(np.abs(measured).max(axis=0), 1.0))
+        # what divides a state's error: its scale, or infinity for a state that is not a measurement (a velocity
+        # derived from a measured position by a smoothing differentiator: its lag and smoothing are not the
+        # plant's), whose entries of the residual and the Jacobian are then zero
+        self.weight = (np.ones(self.n_x) if measured_states is None
+                       else np.asarray(measured_states, dtype=bool).astype(float))
+        self.divisor = np.where(self.weight > 0, self.scale, np.inf)  # (x / scale: the same bits as before)
+        #: The share of the residual's entries that are measurements (the others are held at zero).
+        self.share = float(self.weight.sum()) / self.n_x
         self.x0_start = [np.asarray(v, dtype=float) for v in x0] if x0 is not None else \
             [x[0].copy() for x, _ in self.runs]
         self.coef0 = model.coef.copy()
@@ -285,7 +206,7 @@ class _Problem:
         for r, ((x, u), x0) in enumerate(zip(self.runs, x0s, strict=True)):
             h = min(horizon, len(x) - 1)
             xs = simulate_linear_batch(ad, bd, cd, x0, u[:h])
-            res.append(((xs - x[:h + 1]) / self.scale).ravel())
+            res.append(((xs - x[:h + 1]) / self.divisor).ravel())
             if with_jac:
                 d = e[1:, :q, q:]
                 n_theta = p + (n * n_runs if self.estimate_x0 else 0)
@@ -295,7 +216,7 @@ class _Problem:
                 if self.estimate_x0:
                     s[0, p + r * n:p + (r + 1) * n] = np.eye(n)
                 s = _scan(ad, s)
-                jacs.append((s / self.scale).transpose(0, 2, 1).reshape(-1, n_theta))
+                jacs.append((s / self.divisor).transpose(0, 2, 1).reshape(-1, n_theta))
         return res, jacs
 
     # -- residuals and Jacobian, nonlinear models (exact sensitivities by CasADi, :mod:`._sensitivity`)
@@ -316,12 +237,12 @@ class _Problem:
                 jacs.append(np.full(((h + 1) * n, n_theta), np.nan))
                 continue
             xs, sens = run
-            res.append(((xs - x[:h + 1]) / self.scale).ravel())
+            res.append(((xs - x[:h + 1]) / self.divisor).ravel())
             jac = np.zeros((h + 1, n, n_theta))
             jac[:, :, :p] = sens[:, :, :p]
             if self.estimate_x0:
                 jac[:, :, p + r * n:p + (r + 1) * n] = sens[:, :, p:]
-            jacs.append((jac / self.scale[None, :, None]).reshape(-1, n_theta))
+            jacs.append((jac / self.divisor[None, :, None]).reshape(-1, n_theta))
         return res, jacs
 
     # -- residuals, nonlinear models (batched RK4, finite differences: the reference the tests compare with)
@@ -348,7 +269,7 @@ class _Problem:
                     state = state + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
                     state = np.where(np.abs(state) < DIVERGENCE_LIMIT, state, np.nan)
                     traj[k + 1] = state
-            out.append(((traj - x[:h + 1, None, :]) / self.scale).transpose(1, 0, 2).reshape(batch, -1))
+            out.append(((traj - x[:h + 1, None, :]) / self.divisor).transpose(1, 0, 2).reshape(batch, -1))
         return out
 
 
@@ -428,7 +349,8 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
                         x0: Sequence[np.ndarray] | None = None, coef_scale: np.ndarray | None = None,
                         prior: float = 0.1, prior_anchor: np.ndarray | None = None, continuation: bool = True,
                         max_nfev: int = 60, fd_step: float = 1e-6, exact_jacobian: bool = True,
-                        stability_limit: float | None = None) -> OutputErrorFit:
+                        stability_limit: float | None = None, measured: Sequence[bool] | None = None
+                        ) -> OutputErrorFit:
     """Refine a model's non-zero coefficients (and initial states) by minimising its free-run error.
 
     Parameters
@@ -466,6 +388,15 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
         Keep the linear part stable: each eigenvalue with a positive real part adds a penalty row to every
         stage (:class:`~cosim.identify._stability.StabilityPenalty`); the fit ends well inside ``Re(lambda) <=
         stability_limit`` (1/s), as MATLAB's ``ssest`` with ``EnforceStability``. None (default): unconstrained.
+    measured : sequence of bool, optional
+        Per state, whether it is a measurement (default: all). A state that is not (a velocity derived from a
+        measured position by a smoothing differentiator) still evolves in the free run and its initial state is
+        still estimated, through the measured states, but its error counts in no cost: fitting a smoothed,
+        lagging derivative pulls a lightly damped model away from the plant. The costs are means over the
+        measured states. Use it to refine a model that already follows the data (the diagnosis's stable refit
+        of its final model does): from an equation-error start, positions alone admit degenerate fits (on a
+        closed-loop record, a mode so fast that the position follows the input statically), which the derived
+        velocity's error rules out; `cosim identify` keeps it in its cost for that reason.
 
     Returns
     -------
@@ -507,7 +438,11 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     support = (model.coef != 0.0) if support is None else np.asarray(support, dtype=bool)
     if support.shape != model.coef.shape:
         raise InvalidSettingError(f"support must have the shape of coef {model.coef.shape}, got {support.shape}")
-    problem = _Problem(model, runs, float(dt), support, bool(estimate_x0), x0, coef_scale)
+    if measured is not None and (len(measured) != n_x or not any(measured)):
+        raise InvalidSettingError(f"measured must give {n_x} flags, one per state, at least one true; "
+                                  f"got {list(measured)}")
+    problem = _Problem(model, runs, float(dt), support, bool(estimate_x0), x0, coef_scale, measured)
+    share = problem.share
     n_max = max(len(x) - 1 for x, _ in problem.runs)
     n_params = problem.theta0.size
 
@@ -516,7 +451,7 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
             res = np.concatenate(problem.linear_residuals(theta, horizon, False)[0])
         else:
             res = np.concatenate([r[0] for r in problem.nonlinear_residuals(theta[None], horizon)])
-        return float(np.mean(res ** 2)) if np.all(np.isfinite(res)) else math.inf
+        return float(np.mean(res ** 2)) / share if np.all(np.isfinite(res)) else math.inf
 
     start_theta = problem.theta0.copy()
     if estimate_x0:  # the starting cost is that of the starting model from the measured first samples
@@ -558,11 +493,12 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     final_jac = None
     while True:
         last = horizon >= n_max
-        weight = 0.0 if last else prior * (horizon + 1) * n_x * len(problem.runs)
+        weight = 0.0 if last else prior * (horizon + 1) * n_x * share * len(problem.runs)
         penalty = None
         if stability_limit is not None:
             r0 = residuals(theta, horizon)
-            penalty = StabilityPenalty(problem, stability_limit, float(np.mean(r0 ** 2)), r0.size)
+            penalty = StabilityPenalty(problem, stability_limit, float(np.mean(r0 ** 2)) / share,
+                                       int(round(r0.size * share)))
         stage = _Stage(residuals, jacobian, horizon, math.sqrt(weight) * problem.prior_weight if weight > 0 else None,
                        anchor, problem.n_coef, penalty)
         n_res = stage.fun(theta).size
@@ -570,7 +506,7 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
         sol = least_squares(stage.fun, theta, jac=stage.jac, method=method, x_scale=problem.x_scale, xtol=1e-10,
                             ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
         theta = sol.x
-        stages.append({"horizon": int(horizon), "cost": float(2.0 * sol.cost / n_res), "nfev": int(sol.nfev)})
+        stages.append({"horizon": int(horizon), "cost": float(2.0 * sol.cost / n_res) / share, "nfev": int(sol.nfev)})
         if last:
             final_jac = sol.jac
             break
@@ -581,7 +517,7 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
     std_error = np.zeros_like(coef)
     covariance = None
     if final_jac is not None and math.isfinite(cost):
-        n_res = final_jac.shape[0]
+        n_res = final_jac.shape[0] * share  # the entries that are measurements
         with np.errstate(all="ignore"):
             try:
                 cov = np.linalg.pinv(final_jac.T @ final_jac) * cost * n_res / max(n_res - theta.size, 1)
