@@ -65,18 +65,3 @@ def test_the_kinematic_rows_stay_pinned():
     assert "stabilised" in out.meta
     assert out.coef[0].tolist() == [0.0, 1.0, 0.0, 0.0]
     np.testing.assert_allclose(out.coef[1], [-4.0, -1.0, 0.0, 1.0], rtol=0.05, atol=0.02)
-
-
-def test_a_state_that_is_no_measurement_does_not_hold_a_mode_unstable():
-    """y' = 2 y grows, and so does the y column (a derived signal's drift, say): fitted, it holds the growth, and
-    the model stays. Named as no measurement (``measured``, as the diagnosis names a derived velocity), its
-    error counts in neither refit: the growth is free, and the model is made stable, its x row kept."""
-    model = IdentifiedModel(states=("x", "y"), inputs=("u",), terms=("x", "y", "u"),
-                            coef=np.array([[-1.0, 0.0, 1.0], [0.0, 2.0, 0.0]]), dt=0.01)
-    columns = _columns(-1.0)
-    columns["y"] = np.exp(0.4 * 0.01 * np.arange(columns["x"].size)) - 1.0
-    assert stable_if_free(model, columns, [0], 0.01) is model
-    out = stable_if_free(model, columns, [0], 0.01, measured=("x",))
-    assert out is not model and "stabilised" in out.meta
-    assert np.max(np.linalg.eigvals(out.linear_matrices()[0]).real) <= 1.0 / 5.0
-    np.testing.assert_allclose(out.coef[0], [-1.0, 0.0, 1.0], atol=1e-3)

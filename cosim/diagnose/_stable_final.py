@@ -15,13 +15,6 @@ are no longer predicted worse than before the effect: 40, 45 and 74 (twin NRMSE 
 pinned its stable refit costs more than the ratio allows and stays 25.1 -> 25.7 %). It does not reach 190
 (+5.3 1/s; the stable refit from the fitted initial state costs 1.95 times more) nor 54 (+0.05 1/s, inside the
 marginal 0.10 1/s): a local refit.
-
-Both refits fit the measured states only, as the search does: a velocity derived from a measured position (its
-smoothing differentiator lags and flattens the plant's) counts in no cost. Fitting it too had pulled the stable
-refits of positions-only records off the plant: with it left out, the twins of four records' findings moved
-(cosim at 9ced409, the same benchmark): 143 from 11669 % (a finding that made its twin worse than the model
-before, 92.5 %) to 48.1 %, 90 23.3 -> 1.95 %, 36 3.59 -> 2.92 %, 102 16.2 -> 20.0 % (its model before: 32.2 %);
-no named effect changed.
 """
 
 from __future__ import annotations
@@ -58,11 +51,10 @@ def _grows(model: IdentifiedModel, limit: float) -> bool:
 
 
 def stable_if_free(model: IdentifiedModel, columns: Mapping[str, np.ndarray], starts: Sequence[int],
-                   dt: float, measured: Sequence[str] | None = None) -> IdentifiedModel:
+                   dt: float) -> IdentifiedModel:
     """`model`, or its stable output-error refit when its growing modes are free (see the module notes).
 
-    `columns` hold the records concatenated (every state and input of the model), `starts` where each begins;
-    `measured` names the states that are measurements (None: all): the refits fit those only."""
+    `columns` hold the records concatenated (every state and input of the model), `starts` where each begins."""
     runs = _runs(model, columns, starts)
     if not runs:
         return model
@@ -73,12 +65,10 @@ def stable_if_free(model: IdentifiedModel, columns: Mapping[str, np.ndarray], st
     x0 = model.meta.get("x0") if isinstance(model.meta, Mapping) else None
     start = [np.asarray(v, dtype=float) for v in x0] if x0 is not None and len(x0) == len(runs) else None
     support = _support(model, Roles.of(model).velocity_of)  # (the kinematic rows stay pinned)
-    flags = None if measured is None else tuple(s in measured for s in model.states)
     try:
-        free = refine_output_error(model, runs_oe, dt=dt, x0=start, support=support, continuation=False,
-                                   measured=flags)
+        free = refine_output_error(model, runs_oe, dt=dt, x0=start, support=support, continuation=False)
         kept = refine_output_error(model, runs_oe, dt=dt, x0=start, support=support, continuation=False,
-                                   stability_limit=limit, measured=flags)
+                                   stability_limit=limit)
     except (DataError, InvalidSettingError, np.linalg.LinAlgError, FloatingPointError, ValueError):
         return model
     if not (math.isfinite(kept.cost) and kept.cost <= STABLE_COST_RATIO * free.cost):

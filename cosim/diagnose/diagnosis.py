@@ -430,7 +430,7 @@ def _diagnose(model: IdentifiedModel, data: Trajectory | Sequence[Trajectory], *
         steps[-1:] = [(steps[-1][0], current)] if steps else []  # (the last step's model is the polished one)
     first = given[0]
     work = _with_columns(first, {k: v[:len(first)] for k, v in columns.items()})  # plus any column an effect added
-    final = stable_if_free(current, columns, starts, first.dt, fit.measured) if accepted else current
+    final = stable_if_free(current, columns, starts, first.dt) if accepted else current
     res_after = residuals(final, work, x0=_first_x0(_fitted_x0(final, segments))) if accepted else res_before
     after = _figures_of(final, [_with_columns(r, _record_columns(columns, starts, k, r)) for k, r in
                                 enumerate(truth)], res_after, None, final, fit.measured) if accepted else before

@@ -393,10 +393,11 @@ def refine_output_error(model: IdentifiedModel, runs: Sequence[tuple[np.ndarray,
         measured position by a smoothing differentiator) still evolves in the free run and its initial state is
         still estimated, through the measured states, but its error counts in no cost: fitting a smoothed,
         lagging derivative pulls a lightly damped model away from the plant. The costs are means over the
-        measured states. Use it to refine a model that already follows the data (the diagnosis's stable refit
-        of its final model does): from an equation-error start, positions alone admit degenerate fits (on a
-        closed-loop record, a mode so fast that the position follows the input statically), which the derived
-        velocity's error rules out; `cosim identify` keeps it in its cost for that reason.
+        measured states. Two cautions, measured on the generalisation benchmark, why cosim's own fits keep
+        derived velocities in their cost: from an equation-error start, positions alone admit degenerate fits
+        (on a closed-loop record, a mode so fast that the position follows the input statically), which the
+        derived velocity's error rules out; and the positions-only cost is flatter, so a fit may end at points
+        that differ between BLAS kernels by more than 1e-4 (docs/issue39_selection.md).
 
     Returns
     -------
