@@ -115,8 +115,8 @@ def derived_velocities(record: Trajectory) -> dict[str, str]:
     ``POS_dot`` for each position, or the names a caller gave them (``meta["data_file"]["derivatives"]
     ["velocities"]``, as ``cosim``'s ``--derive VEL=POS`` records them). Empty for a record that derived none.
 
-    A derived velocity is the output of a smoothing differentiator, not a measurement: fits of the plant's
-    free run leave it out of their cost.
+    A derived velocity is the output of a smoothing differentiator, not a measurement: the diagnosis's search
+    leaves it out of its cost (:func:`cosim.diagnose._free_run.measured_states`).
 
     Examples
     --------
