@@ -201,10 +201,8 @@ def test_batched_scores_match_one_by_one(derived_velocity):
 
 
 def test_compiled_rk4_gives_the_interpreters_bits(monkeypatch):
-    from cosim.identify import _jit, terms
+    from cosim.identify import terms
 
-    monkeypatch.setattr(_jit, "COMPILE_S", 0.0)  # no budget: compiled at its first run (_jit.Tiered)
-    monkeypatch.setattr(_jit, "COMPILE_S_PER_INSTRUCTION", 0.0)
     m = friction_model()
     u = drive(terms._JIT_MIN_STEPS + 500, gain=300.0)[:, None]
     compiled = m.simulate([0.1, 0.0], u[:-1], dt=DT).states  # long enough to be run compiled
@@ -237,30 +235,18 @@ def test_compiled_linear_run_gives_the_python_loops_bits(monkeypatch):
 
 
 def test_compiled_sensitivities_give_the_interpreters_bits(monkeypatch):
-    from cosim.identify import _jit, _sensitivity
+    from cosim.identify import _sensitivity
     from cosim.identify._sensitivity import free_run_sensitivities
 
     m = friction_model()
     u = drive(_sensitivity._JIT_MIN_STEPS + 300, gain=300.0)[:, None]
-    monkeypatch.setattr(_jit, "COMPILE_S", 0.0)  # no budget: compiled at its first run (_jit.Tiered)
-    monkeypatch.setattr(_jit, "COMPILE_S_PER_INSTRUCTION", 0.0)
-    _sensitivity._sensitivity_chunk.cache_clear()
-    runs = [free_run_sensitivities(m, m.coef, m.coef != 0, np.array([0.1, 0.0]), u, DT, len(u))]
-    assert _sensitivity._sensitivity_chunk(2, 1, *_sensitivity_key(m), jit=True).compiled is not None
+    runs = [free_run_sensitivities(m, m.coef, m.coef != 0, np.array([0.1, 0.0]), u, DT, len(u))]  # compiled
     monkeypatch.setattr(_sensitivity, "_JIT_MIN_STEPS", 10 ** 9)  # the interpreter only
     runs.append(free_run_sensitivities(m, m.coef, m.coef != 0, np.array([0.1, 0.0]), u, DT, len(u)))
     (states_c, sens_c), (states_i, sens_i) = runs
     assert np.ptp(states_c[:, 1]) > 0.1 and np.ptp(sens_c) > 0
     np.testing.assert_array_equal(states_c, states_i)
     np.testing.assert_array_equal(sens_c, sens_i)
+    from cosim.plant.build import fmu_cache_dir
 
-
-def _sensitivity_key(model):
-    """The structure arguments free_run_sensitivities gives _sensitivity_chunk, after n and m."""
-    from cosim.identify.terms import _emit
-
-    numbers: list[float] = []
-    names = {**{name: f"x[{i}]" for i, name in enumerate(model.states)},
-             **{name: f"u[{j}]" for j, name in enumerate(model.inputs)}}
-    sources = tuple(_emit(term._tree.body, names, "python", numbers) for term in model._parsed)
-    return sources, len(numbers), len(model.terms), (model.coef != 0).tobytes()
+    assert list((fmu_cache_dir() / "jit").glob("cosim_sens_*.so"))  # it was compiled, and kept

@@ -6,17 +6,10 @@ a 12 s diagnosis. Here the function's generated C is hashed and its shared libra
 atomically, so that another process or a later run loads it instead of compiling; at most
 :data:`MAX_LIBRARIES` are kept, the least recently used removed first. Written by hand because CasADi has no
 persistent cache of compiled functions.
-
-A structure is compiled only once its runs have cost what compiling it would (:class:`Tiered`): most model
-structures a diagnosis tries run a few dozen chunks, less than a second's compilation is worth, and compiling
-every one took a third of a diagnosis with a cold cache (record 5 of the generalisation benchmark: 3.5 of
-10.5 s). The compiled and the interpreted function give the same bits, so where the switch falls changes no
-result (``tests/test_screening_speedups.py``).
 """
 
 from __future__ import annotations
 
-import atexit
 import ctypes
 import hashlib
 import os
@@ -36,81 +29,13 @@ COMPILE_TIMEOUT_S = 120
 MAX_LIBRARIES = 1024
 
 
-#: The cost model of :class:`Tiered`, measured on a 2-core AMD EPYC with gcc -O1 (2026-12-05): compiling a
-#: function costs about ``COMPILE_S + COMPILE_S_PER_INSTRUCTION * instructions`` of its step (0.3-0.4 s for a
-#: two-mass RK4 step of 190-360 instructions, 0.5-1.2 s for its sensitivities' step of 2100-4700), and CasADi's
-#: interpreter about ``INTERPRETED_S_PER_INSTRUCTION`` an instruction and step (1.0-1.9 ms a 1024-step chunk
-#: of the RK4 steps, 12-25 ms of the sensitivities'), about six times the compiled code's time.
-COMPILE_S = 0.25
-COMPILE_S_PER_INSTRUCTION = 1.5e-4
-INTERPRETED_S_PER_INSTRUCTION = 5.5e-9
-#: Most structures whose interpreted steps are remembered in the cache (``<library>.steps``, a few bytes each).
-MAX_REMEMBERED = 8 * MAX_LIBRARIES
-
-_pending: dict[Path, int] = {}  # steps interpreted in this process, per structure's count file, not written yet
-
-
-class Tiered:
-    """A CasADi function evaluated by CasADi's interpreter until the steps it has run would have paid for its
-    compilation, then compiled (the ski-rental rule: never much more than twice the cheaper of the two choices,
-    whatever the number of runs to come); loaded at once where the cache already holds it.
-
-    `instructions` is the size of one step of the function (``n_instructions()`` of the function mapped over a
-    chunk), from which :data:`COMPILE_S` and its neighbours give the steps that pay for a compilation. The steps
-    are counted across processes (kept beside the libraries, written when a process ends), so that a structure
-    every diagnosis runs a little is compiled once, as a structure one diagnosis runs much is. The count is of
-    steps, not of seconds, so that when a structure is compiled does not depend on the machine's load."""
-
-    def __init__(self, interpreted, name: str, instructions: int):
-        self.interpreted, self.name = interpreted, name
-        size = max(int(instructions), 1)
-        self.budget = (COMPILE_S + COMPILE_S_PER_INSTRUCTION * size) / (INTERPRETED_S_PER_INSTRUCTION * size)
-        self.compiled = None
-        self._source = self._library = None
-        self.steps = 0
-        try:
-            self._source = _c_source(interpreted, name)
-            self._library = _library_path(self._source, name)
-        except Exception:  # noqa: BLE001 - no compiler (or Windows): the interpreter runs it
-            return
-        if self._library.is_file():
-            self.compiled = _loaded(self._library, name)
-        if self.compiled is None:
-            self.steps = _remembered(self._counts())
-
-    def pick(self, steps: int):
-        """The function to run `steps` more steps with: the compiled one once the steps so far (these included,
-        and those of earlier processes) reach the budget and a C compiler works, else the interpreted one."""
-        if self.compiled is None and self._library is not None:
-            self.steps += steps
-            counts = self._counts()
-            _pending[counts] = _pending.get(counts, 0) + steps
-            if self.steps >= self.budget:
-                library, self._library = self._library, None  # one attempt
-                _pending.pop(counts, None)
-                counts.unlink(missing_ok=True)
-                if not library.is_file():  # (another process may have built it meanwhile)
-                    try:
-                        _build(self._source, library, self.name)
-                    except Exception:  # noqa: BLE001 - a failed build: the interpreter runs it
-                        return self.interpreted
-                self.compiled = _loaded(library, self.name)
-        return self.interpreted if self.compiled is None else self.compiled
-
-    def _counts(self) -> Path:
-        return self._library.with_suffix(".steps")
-
-
-def compiled(function, name: str, build: bool = True):
+def compiled(function, name: str):
     """`function` (a CasADi Function) loaded from a compiled shared library, or None where that cannot be done
-    (no C compiler, Windows, a failed build; with ``build=False``, also where the cache does not hold it yet):
-    the caller then evaluates `function` itself."""
+    (no C compiler, Windows, a failed build): the caller then evaluates `function` itself."""
     try:
         source = _c_source(function, name)
         library = _library_path(source, name)
         if not library.is_file():
-            if not build:
-                return None
             _build(source, library, name)
         return _load(library, name)
     except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build: the interpreter runs it
@@ -120,6 +45,8 @@ def compiled(function, name: str, build: bool = True):
 def compiled_c(source: str, name: str) -> ctypes.CDLL | None:
     """Hand-written C `source` compiled (as :func:`compiled`'s, cached the same way) and loaded with ctypes, or
     None where that cannot be done: the caller then runs its NumPy version."""
+    if sys.platform.startswith("win"):
+        return None
     try:
         library = _library_path(source.encode(), name)
         if library.is_file():
@@ -149,14 +76,6 @@ def _load(library: Path, name: str):
 
     os.utime(library)  # used now: the last to be pruned
     return ca.external(name, str(library))
-
-
-def _loaded(library: Path, name: str):
-    """:func:`_load`, or None where the library cannot be loaded (removed by a concurrent prune, damaged)."""
-    try:
-        return _load(library, name)
-    except Exception:  # noqa: BLE001 - the interpreter runs it
-        return None
 
 
 @lru_cache(maxsize=4)
@@ -200,37 +119,10 @@ def _build(source: bytes, library: Path, name: str) -> Path:
     return library
 
 
-def _remembered(counts: Path) -> int:
-    try:
-        return int(counts.read_text())
-    except (OSError, ValueError):
-        return 0
-
-
-@atexit.register
-def _remember() -> None:
-    """Add this process's interpreted steps to each structure's count in the cache (best effort: a count lost to
-    a concurrent process or a full disk only delays a compilation)."""
-    for counts, steps in list(_pending.items()):
-        try:
-            counts.parent.mkdir(parents=True, exist_ok=True)
-            fd, partial = tempfile.mkstemp(dir=counts.parent, prefix=".", suffix=".steps.tmp")
-            with os.fdopen(fd, "w") as out:
-                out.write(str(_remembered(counts) + steps))
-            os.replace(partial, counts)
-        except OSError:
-            pass
-    folders = {counts.parent for counts in _pending}
-    _pending.clear()
-    for folder in folders:
-        prune(folder, MAX_REMEMBERED, "*.steps")
-
-
-def prune(folder: Path, keep: int, pattern: str = "*.so") -> list[Path]:
+def prune(folder: Path, keep: int) -> list[Path]:
     """Remove all but the `keep` most recently used shared libraries of `folder` (by modification time, which a
-    load refreshes; or the files matching `pattern`); returns the removed ones. A library another process has
-    loaded stays mapped there."""
-    libraries = sorted(folder.glob(pattern), key=lambda p: p.stat().st_mtime, reverse=True)
+    load refreshes); returns the removed ones. A library another process has loaded stays mapped there."""
+    libraries = sorted(folder.glob("*.so"), key=lambda p: p.stat().st_mtime, reverse=True)
     removed = []
     for path in libraries[keep:]:
         try:

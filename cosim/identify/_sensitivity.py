@@ -51,8 +51,6 @@ def free_run_sensitivities(model: IdentifiedModel, coef: np.ndarray, support: np
     support = np.asarray(support, dtype=bool)
     run = _sensitivity_chunk(n, m, sources, len(numbers), len(model.terms), support.tobytes(),
                              jit=steps >= _JIT_MIN_STEPS)
-    if steps >= _JIT_MIN_STEPS:  # compiled once this structure's runs pay for it (_jit.Tiered)
-        run = run.pick(-(-steps // _CASADI_CHUNK) * _CASADI_CHUNK)
     q = int(support.sum()) + n
     z0 = np.concatenate([np.asarray(x0, dtype=float), np.hstack([np.zeros((n, q - n)), np.eye(n)]).ravel("F")])
     rows = np.asarray(u, dtype=float).reshape(len(u), m)[:steps]
@@ -71,16 +69,15 @@ def _sensitivity_chunk(n: int, m: int, sources: tuple[str, ...], n_numbers: int,
                        support_bytes: bytes, jit: bool = False):
     """The chunked run of the state and its sensitivities for one model structure and support (cached).
 
-    With `jit`, its :class:`._jit.Tiered`: compiled to machine code where a C compiler works once its runs have
-    paid for that, with the same bits as CasADi's interpreter in a sixth of its time a call (a two-mass model
-    with a cogging and a Stribeck friction, 22 sensitivities, 4000 samples: 81 -> 13.5 ms), 0.5-1.2 s to compile
-    a structure the first time on a machine, then loaded from the cache. For records of a chunk or more, as the
-    plain run (:data:`~.terms._JIT_MIN_STEPS`)."""
+    With `jit`, compiled to machine code (:mod:`._jit`) where a C compiler works: the same bits as CasADi's
+    interpreter, a sixth of its time a call (a two-mass model with a cogging and a Stribeck friction, 22
+    sensitivities, 4000 samples: 81 -> 13.5 ms), 0.8 s to compile a structure the first time on a machine, then
+    loaded from the cache. For records of a chunk or more, as the plain run (:data:`~.terms._JIT_MIN_STEPS`)."""
     if jit:
-        from ._jit import Tiered
+        from ._jit import compiled
 
         interpreted = _sensitivity_chunk(n, m, sources, n_numbers, n_terms, support_bytes)
-        return Tiered(interpreted, "cosim_sens", interpreted.instructions)
+        return compiled(interpreted, "cosim_sens") or interpreted
     import casadi as ca
 
     support = np.frombuffer(support_bytes, dtype=bool).reshape(n, n_terms)
@@ -110,6 +107,4 @@ def _sensitivity_chunk(n: int, m: int, sources: tuple[str, ...], n_numbers: int,
     mapped = step.mapaccum("cosim_sens_run", _CASADI_CHUNK, [0], [0])
     zs, us = ca.MX.sym("z", n + n * q), ca.MX.sym("u", m, _CASADI_CHUNK)
     hs, cs, ks = ca.MX.sym("h"), ca.MX.sym("c", n * n_terms), ca.MX.sym("k", n_numbers)
-    function = ca.Function("cosim_sens", [zs, us, hs, cs, ks], [mapped(zs, us, hs, cs, ks)])
-    function.instructions = step.n_instructions()  # one step's size, for Tiered's budget
-    return function
+    return ca.Function("cosim_sens", [zs, us, hs, cs, ks], [mapped(zs, us, hs, cs, ks)])

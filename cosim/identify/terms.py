@@ -346,12 +346,11 @@ def compile_rk4(states: Sequence[str], inputs: Sequence[str], terms: Sequence[Te
 
 #: Steps of one call of a CasADi run (the last call is padded with held inputs; its extra steps are dropped).
 _CASADI_CHUNK = 1024
-#: Records of at least this many steps may be run by the chunk compiled to machine code (:mod:`._jit`, through
-#: the system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits; 0.3 s to compile a
-#: model structure the first time on a machine, then loaded from the cache), once a structure's runs have paid
-#: for its compilation (:class:`._jit.Tiered`); shorter ones by the interpreter. One chunk: a decimated long
-#: record (4000 samples or more) is run compiled too; at 8 chunks its runs took half of the timing record's
-#: diagnosis (benchmarks/bench_diagnosis.py, 16.3 -> 10.4 s).
+#: Records of at least this many steps are run by the chunk compiled to machine code (:mod:`._jit`, through the
+#: system C compiler: 5.5 times faster a call than CasADi's interpreter, the same bits; 0.2 s to compile a
+#: model structure the first time on a machine, then loaded from the cache); shorter ones by the interpreter.
+#: One chunk: a decimated long record (4000 samples or more) is run compiled too; at 8 chunks its runs took
+#: half of the timing record's diagnosis (benchmarks/bench_diagnosis.py, 16.3 -> 10.4 s).
 _JIT_MIN_STEPS = _CASADI_CHUNK
 
 
@@ -377,10 +376,7 @@ def compile_rk4_casadi(states: Sequence[str], inputs: Sequence[str], terms: Sequ
 
     def run(x0, rows, h, nsub, limit):
         rows = np.asarray(rows, dtype=float).reshape(len(rows), len(inputs))
-        if len(rows) >= _JIT_MIN_STEPS:  # compiled once this structure's runs pay for it (_jit.Tiered)
-            runner = chunk(nsub, True).pick(-(-len(rows) // _CASADI_CHUNK) * _CASADI_CHUNK)
-        else:
-            runner = chunk(nsub)
+        runner = chunk(nsub, len(rows) >= _JIT_MIN_STEPS)
         return _chunked_run(runner, (h, params), x0, rows, limit)
 
     return run
@@ -457,14 +453,12 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
 
     @lru_cache(maxsize=8)
     def chunk(nsub: int, jit: bool = False):
-        """The interpreted chunk; with `jit`, its :class:`._jit.Tiered` (machine code once its runs pay for it)."""
         if jit:
-            from ._jit import Tiered
+            from ._jit import compiled  # machine code, or None where no C compiler works
 
-            return Tiered(chunk(nsub), "cosim_rk4", steps(nsub).n_instructions())
-        return _whole_chunk(steps(nsub).mapaccum("rk4_run", _CASADI_CHUNK, [0], [0]), n, m, n_coef + n_numbers)
+            return compiled(chunk(nsub), "cosim_rk4") or chunk(nsub)
+        return _whole_chunk(steps(nsub), n, m, n_coef + n_numbers)
 
-    @lru_cache(maxsize=8)
     def steps(nsub: int):
         s = [x[i] for i in range(n)]
         for _ in range(nsub):  # the arithmetic of compile_rk4, in its order
@@ -473,7 +467,8 @@ def _casadi_step(n: int, m: int, sources: tuple[str, ...], n_numbers: int, patte
             c_ = rhs([s[i] + 0.5 * h * b[i] for i in range(n)])
             d = rhs([s[i] + h * c_[i] for i in range(n)])
             s = [s[i] + h / 6.0 * (a[i] + 2.0 * b[i] + 2.0 * c_[i] + d[i]) for i in range(n)]
-        return ca.Function("rk4_step", [x, u, h, p], [ca.vertcat(*s)])
+        step = ca.Function("rk4_step", [x, u, h, p], [ca.vertcat(*s)])
+        return step.mapaccum("rk4_run", _CASADI_CHUNK, [0], [0])
 
     return chunk
 
