@@ -32,12 +32,17 @@ MAX_LIBRARIES = 1024
 def compiled(function, name: str):
     """`function` (a CasADi Function) loaded from a compiled shared library, or None where that cannot be done
     (no C compiler, Windows, a failed build): the caller then evaluates `function` itself."""
+    import casadi as ca
+
+    if sys.platform.startswith("win"):
+        return None
     try:
-        source = _c_source(function, name)
-        library = _library_path(source, name)
-        if not library.is_file():
-            _build(source, library, name)
-        return _load(library, name)
+        with tempfile.TemporaryDirectory() as tmp:
+            generator = ca.CodeGenerator(f"{name}.c")
+            generator.add(function)
+            generator.generate(tmp + os.sep)
+            library = _library(Path(tmp, f"{name}.c").read_bytes(), name)
+        return ca.external(name, str(library))
     except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build: the interpreter runs it
         return None
 
@@ -48,59 +53,32 @@ def compiled_c(source: str, name: str) -> ctypes.CDLL | None:
     if sys.platform.startswith("win"):
         return None
     try:
-        library = _library_path(source.encode(), name)
-        if library.is_file():
-            os.utime(library)  # used now: the last to be pruned
-        else:
-            _build(source.encode(), library, name)
-        return ctypes.CDLL(str(library))
+        return ctypes.CDLL(str(_library(source.encode(), name)))
     except Exception:  # noqa: BLE001 - no compiler, no cache folder, a failed build
         return None
 
 
-def _c_source(function, name: str) -> bytes:
-    """The C code CasADi generates for `function` (named `name`); raises on Windows (no compiled path there)."""
-    import casadi as ca
-
-    if sys.platform.startswith("win"):
-        raise OSError("no compiled functions on Windows")
-    with tempfile.TemporaryDirectory() as tmp:
-        generator = ca.CodeGenerator(f"{name}.c")
-        generator.add(function)
-        generator.generate(tmp + os.sep)
-        return Path(tmp, f"{name}.c").read_bytes()
-
-
-def _load(library: Path, name: str):
-    import casadi as ca
-
-    os.utime(library)  # used now: the last to be pruned
-    return ca.external(name, str(library))
-
-
 @lru_cache(maxsize=4)
 def _compiler(cc: str) -> tuple[tuple[str, ...], str]:
-    """The compiler command and its version (a process's, asked once: a run of ``cc --version`` a structure
-    was about 2 ms each of a diagnosis's thousands of lookups). `cc` is ``$CC``, the cache's key."""
+    """The compiler command and its version, asked once a process (a run of ``cc --version``, about 2 ms, at each
+    of a diagnosis's hundreds of lookups before). `cc` is ``$CC``, read by ``find_compiler``: the cache's key."""
     from ..plant.toolchain import compiler_version, find_compiler
 
     compiler = find_compiler()
     return tuple(compiler), compiler_version(compiler)
 
 
-def _library_path(source: bytes, name: str) -> Path:
-    """Where the shared library of C `source` is (or would be) in the cache; raises without a C compiler."""
+def _library(source: bytes, name: str) -> Path:
+    """The shared library of C `source`, from the cache or compiled into it (atomically); raises where it cannot."""
     from ..plant.build import fmu_cache_dir
 
-    _, version = _compiler(os.environ.get("CC", ""))
+    compiler, version = _compiler(os.environ.get("CC", ""))
     key = hashlib.sha256(source + version.encode()).hexdigest()[:24]
-    return fmu_cache_dir() / "jit" / f"{name}_{key}.so"
-
-
-def _build(source: bytes, library: Path, name: str) -> Path:
-    """Compile C `source` into `library` (atomically), then prune the cache; raises where it cannot."""
-    compiler, _ = _compiler(os.environ.get("CC", ""))
-    folder = library.parent
+    folder = fmu_cache_dir() / "jit"
+    library = folder / f"{name}_{key}.so"
+    if library.is_file():
+        os.utime(library)  # used now: the last to be pruned
+        return library
     folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp, f"{name}.c")
