@@ -13,6 +13,8 @@ the noise) and the diagnosis' acceptance rules. Its held-out figures take the or
 
 (e) ``cosim diagnose DATA.csv --state S --input U [--derive POS] --effects ITEMS --json -o ..``
 
+(oe) both: the oracle base and told the true effects, the most any search from this diagnosis could name.
+
 the default path told the record's true effects, each at its true nuisance value (``cogging:periods=17``,
 ``delay:delay=12``...; records without an effect run the whole catalogue, as path (a)). What it still misses no
 search could find: the record does not show the effect against the identified base beyond the acceptance rules
@@ -91,12 +93,17 @@ def commands(folder: Path, cli: dict, cosim: str) -> dict[str, list[list[str]]]:
     told = list(cmds["a"][-1])
     told[told.index("-o") + 1] = str(folder / "model_after_e.json")
     spec = json.loads((folder / "truth.json").read_text())["spec"]
-    return {**cmds, "o": [diagnose], "e": [[*told, "--effects", told_effects(spec)]]}
+    both = list(diagnose)
+    both[both.index("-o") + 1] = str(folder / "model_after_oe.json")
+    return {**cmds, "o": [diagnose], "e": [[*told, "--effects", told_effects(spec)]],
+            "oe": [[*both, "--effects", told_effects(spec)]]}
 
 
-def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict) -> dict[str, Any]:
-    """The benchmark's held-out figures; path (o)'s against the oracle model as the model before."""
-    return _heldout_figures(path, named, folder, spec, cli, folder / ORACLE if path == "o" else None)
+def heldout_figures(path: str, named: list[str], folder: Path, spec: dict, cli: dict,
+                    before: Any = None) -> dict[str, Any]:
+    """The benchmark's held-out figures; path (o)'s against the oracle model as the model before, the others'
+    against `before` (path (a)'s base as its JSON gives it) as the benchmark's own."""
+    return _heldout_figures(path, named, folder, spec, cli, folder / ORACLE if path in ("o", "oe") else before)
 
 
 _commands, _heldout_figures = gen.commands, gen.heldout_figures
@@ -104,7 +111,9 @@ _commands, _heldout_figures = gen.commands, gen.heldout_figures
 
 def markdown(result: dict[str, Any]) -> str:
     """The per-effect table of each path, and the records only one of (o) and (a) names right first."""
-    titles = {"o": "(o) the plant's own linear part given as `--model`", "a": "(a) the default path (identifies first)",
+    titles = {"o": "(o) the plant's own linear part given as `--model`",
+              "oe": "(oe) the plant's own linear part, told the true effects",
+              "a": "(a) the default path (identifies first)",
               "e": "(e) the default path told the true effects and their nuisance values (`--effects`)"}
     title = "from the plant's own linear part (an oracle base)" if "o" in result["summary"] else \
         "told the records' true effects"

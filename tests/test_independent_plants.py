@@ -190,3 +190,17 @@ def test_the_told_path_names_the_true_effects_at_their_true_nuisance_values():
     assert parsed.fixed == {"delay": 14.0, "cogging": 17.0, "stribeck": 0.25}
     assert list(parsed.names) == ["delay", "cogging", "stribeck", "gravity"]
     assert oracle.told_effects({"dt": 0.002, "effects": []}) == "all"
+
+
+def test_the_oracle_bench_takes_the_held_out_call_of_the_generalisation_bench():
+    """The oracle bench replaces the generalisation bench's held-out figures with its own (paths (o) and (oe)
+    against the oracle base); the run calls it as the generalisation bench's, so it must take every argument
+    that one takes (it did not once: every held-out figure of the oracle paths was lost to a TypeError)."""
+    import inspect
+
+    import bench_diagnosis_generalization as gen
+    import bench_diagnosis_oracle as oracle
+
+    ours = inspect.signature(oracle.heldout_figures).parameters
+    assert list(inspect.signature(oracle._heldout_figures).parameters) == list(ours)
+    assert list(inspect.signature(gen.heldout_figures).parameters) == list(ours)
