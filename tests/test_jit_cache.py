@@ -11,6 +11,7 @@ import time
 import casadi as ca
 
 from cosim.identify import _jit
+from cosim.plant import native
 
 
 def _function(k: int) -> ca.Function:
@@ -20,7 +21,7 @@ def _function(k: int) -> ca.Function:
 
 def test_libraries_are_kept_then_the_least_recently_used_pruned(tmp_path, monkeypatch):
     monkeypatch.setenv("COSIM_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(_jit, "MAX_LIBRARIES", 2)
+    monkeypatch.setattr(native, "MAX_LIBRARIES", 2)
     folder = tmp_path / "jit"
     first = _jit.compiled(_function(0), "f0")
     assert first is not None and float(first(3.0)) == 3.0
