@@ -27,7 +27,18 @@ building at once both succeed, and a crash never leaves a half-written FMU.
 A source folder holds ``model*.c``/``*.h`` (the model), ``fmi2.c`` and ``fmi3.c`` (the
 FMI wrappers), ``modelDescription.xml`` (FMI 2.0) and ``modelDescription3.xml``
 (FMI 3.0); the builder compiles the model with the wrapper of the requested version
-and stores that version's description as ``modelDescription.xml`` in the FMU.
+and stores that version's description as ``modelDescription.xml`` in the FMU. Only the
+folder itself is compiled and packed (its include path, its sources, its cache key): a
+folder does not share files with another.
+
+A system of FMUs (``fmus/two_mass_servo_split``) is a folder holding an SSP 1.0
+``SystemStructure.ssd`` and one FMU source folder per component, named after the
+component's ``source="resources/<folder>.fmu"``. :func:`build_ssp` builds each
+component with :func:`build_fmu` and packs the ``.ssd`` and the FMUs into an SSP::
+
+    <cache>/fmus/<name>-fmi<2|3>-<key>/<name>.ssp
+
+whose key covers the system folder's files and the components' keys.
 
 Examples
 --------
@@ -62,9 +73,13 @@ from .toolchain import (
     write_zip_atomically,
 )
 
-__all__ = ["build_fmu", "fmu_cache_dir", "fmu_source_dir"]
+__all__ = ["build_fmu", "build_ssp", "fmu_cache_dir", "fmu_source_dir"]
 
 _DEFAULT_NAME = "two_mass_servo"
+_DEFAULT_SYSTEM = "two_mass_servo_split"
+_SSD = "SystemStructure.ssd"  # the SSP's default system structure, also the marker of a system folder
+_SSD_NS = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
+_FMU_MIME = "application/x-fmu-sharedlibrary"
 _NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _WRAPPERS = {2: "fmi2.c", 3: "fmi3.c"}
 _DESCRIPTIONS = {2: "modelDescription.xml", 3: "modelDescription3.xml"}
@@ -98,7 +113,7 @@ def fmu_cache_dir() -> pathlib.Path:
 
 
 def fmu_source_dir(name: str = _DEFAULT_NAME) -> pathlib.Path:
-    """Return the folder holding the C source and model descriptions of a bundled FMU.
+    """Return the folder holding the C source and model descriptions of a bundled FMU, or of a bundled system.
 
     Looks in the installed package ``cosim.fmus`` first (regular and editable
     installs), then in the ``fmus/`` folder next to the ``cosim`` package (a source
@@ -107,12 +122,14 @@ def fmu_source_dir(name: str = _DEFAULT_NAME) -> pathlib.Path:
     Parameters
     ----------
     name : str
-        Name of the bundled FMU, e.g. ``"two_mass_servo"``.
+        Name of the bundled FMU, e.g. ``"two_mass_servo"``, or of a bundled system of FMUs,
+        e.g. ``"two_mass_servo_split"`` (see :func:`build_ssp`).
 
     Returns
     -------
     pathlib.Path
-        The source folder (it holds ``modelDescription.xml``).
+        The source folder: it holds ``modelDescription.xml`` (an FMU) or ``SystemStructure.ssd``
+        and the components' source folders (a system).
 
     Raises
     ------
@@ -126,14 +143,14 @@ def fmu_source_dir(name: str = _DEFAULT_NAME) -> pathlib.Path:
     >>> from cosim.plant.build import fmu_source_dir
     >>> (fmu_source_dir("two_mass_servo") / "model.c").is_file()
     True
+    >>> (fmu_source_dir("two_mass_servo_split") / "SystemStructure.ssd").is_file()
+    True
     """
     _check_name(name)
     for folder in _candidate_dirs(name):
-        if (folder / _DESCRIPTIONS[2]).is_file():
+        if _is_source_folder(folder):
             return folder
-    available = sorted(
-        {p.name for root in _fmu_roots() for p in root.iterdir() if (p / _DESCRIPTIONS[2]).is_file()}
-    )
+    available = sorted({p.name for root in _fmu_roots() for p in root.iterdir() if _is_source_folder(p)})
     raise FmuNotFoundError(
         f"no bundled FMU source named {name!r}: available are {', '.join(available) or 'none'}; "
         "check the name or reinstall cosim"
@@ -179,7 +196,8 @@ def build_fmu(
         FMI headers are missing from fmpy, or the compiler reports errors (their first
         lines are in the message).
     FmuNotFoundError
-        If there is no bundled FMU of that name, or `source` is not a folder with a ``modelDescription.xml``.
+        If there is no bundled FMU of that name (a bundled system's name says to use :func:`build_ssp`), or
+        `source` is not a folder with a ``modelDescription.xml``.
     InvalidSettingError
         If ``fmi_version`` is not 2.0 or 3.0.
 
@@ -195,6 +213,9 @@ def build_fmu(
     if source is None:
         name = _DEFAULT_NAME if name is None else name
         src = fmu_source_dir(name)
+        if not (src / _DESCRIPTIONS[2]).is_file():  # a system's folder
+            raise FmuNotFoundError(f"{name} is a system of FMUs ({_SSD}), not one FMU: build it with "
+                                   f"build_ssp({name!r})")
     else:
         src = pathlib.Path(source).expanduser().absolute()
         if not (src / _DESCRIPTIONS[2]).is_file():
@@ -225,6 +246,93 @@ def build_fmu(
         compile_library(compiler, c_files, [src], platform, library, what=f"{name} (FMI {version})")
         target_dir.mkdir(parents=True, exist_ok=True)
         _write_fmu_atomically(target, description, library, platform, src, c_files, version, model_identifier)
+    return target
+
+
+def build_ssp(
+    name: str = _DEFAULT_SYSTEM,
+    *,
+    fmi_version: str = "2.0",
+    cache_dir: str | os.PathLike[str] | None = None,
+    force: bool = False,
+) -> pathlib.Path:
+    """Build a bundled system of FMUs into an SSP (once): each component FMU from its C source, then the package.
+
+    The system's folder (``fmus/<name>/``) holds ``SystemStructure.ssd`` (SSP 1.0) and, for each component
+    whose ``source`` is ``resources/<id>.fmu``, the FMU source folder ``<id>/``. Each component is built by
+    :func:`build_fmu` (and cached like any FMU), then the ``.ssd`` and the FMUs are packed as
+    ``SystemStructure.ssd`` and ``resources/<id>.fmu`` into a zip written atomically (a temporary file, then a
+    rename).
+
+    Parameters
+    ----------
+    name : str
+        Name of the bundled system, default ``"two_mass_servo_split"`` (the two-mass servo as a motor FMU and
+        a shaft-and-load FMU).
+    fmi_version : str
+        ``"2.0"`` or ``"3.0"`` (``"2"`` and ``"3"`` are accepted too): the FMI version of every component.
+    cache_dir : str or os.PathLike, optional
+        Root of the cache; default :func:`fmu_cache_dir`.
+    force : bool
+        Rebuild the components and repack, even if the cache already holds this build.
+
+    Returns
+    -------
+    pathlib.Path
+        ``<cache>/fmus/<name>-fmi<2|3>-<key>/<name>.ssp``; the key covers the files of the system's folder (the
+        ``.ssd``) and the cache keys of the components (their sources, the FMI version, the platform, the
+        compiler and the FMI headers).
+
+    Raises
+    ------
+    FmuNotFoundError
+        If there is no bundled system of that name (a single FMU's name says to use :func:`build_fmu`).
+    BuildError
+        If a component's ``source`` is not ``resources/<id>.fmu`` with a source folder ``<id>/`` beside the
+        ``.ssd``, the ``.ssd`` is not valid XML, or a component fails to compile.
+    InvalidSettingError
+        If ``fmi_version`` is not 2.0 or 3.0.
+
+    Examples
+    --------
+    >>> import zipfile
+    >>> from cosim.plant.build import build_ssp
+    >>> path = build_ssp("two_mass_servo_split", fmi_version="2.0")  # compiles on first use only
+    >>> path.name
+    'two_mass_servo_split.ssp'
+    >>> sorted(zipfile.ZipFile(path).namelist())
+    ['SystemStructure.ssd', 'resources/motor.fmu', 'resources/shaft_load.fmu']
+    >>> build_ssp("two_mass_servo_split") == path  # second call: the cached file
+    True
+    """
+    version = _parse_fmi_version(fmi_version)
+    src = fmu_source_dir(name)
+    ssd = src / _SSD
+    if not ssd.is_file():
+        raise FmuNotFoundError(f"{name} is one FMU, not a system of FMUs (it has no {_SSD}): build it with "
+                               f"build_fmu({name!r})")
+    components = []
+    for source in _ssd_component_sources(ssd):
+        identifier = source[len("resources/"):-len(".fmu")]
+        fmu = build_fmu(identifier, fmi_version=str(version), cache_dir=cache_dir, force=force,
+                        source=src / identifier)
+        components.append((source, fmu))
+
+    # the key: the system folder's own files (the .ssd), and each component's cache key (its folder's name)
+    parts = [("source:" + p.name, p.read_bytes()) for p in _source_files(src)]
+    parts += [("component:" + source, fmu.parent.name.encode()) for source, fmu in components]
+    parts.append(("builder", _BUILDER_FORMAT.encode()))
+    digest = hashlib.sha256()
+    for label, data in parts:
+        digest.update(label.encode() + b"\0" + len(data).to_bytes(8, "little") + data)
+    root = pathlib.Path(cache_dir).expanduser().absolute() if cache_dir is not None else fmu_cache_dir()
+    target_dir = root / "fmus" / f"{name}-fmi{version}-{digest.hexdigest()[:16]}"
+    target = target_dir / f"{name}.ssp"
+    if target.is_file() and not force and zipfile.is_zipfile(target):
+        return target
+    target_dir.mkdir(parents=True, exist_ok=True)
+    members = [(_SSD, ssd.read_bytes(), 0o644)] + [(source, fmu.read_bytes(), 0o644) for source, fmu in components]
+    write_zip_atomically(target, members)
     return target
 
 
@@ -292,6 +400,34 @@ def _fmu_roots() -> list[pathlib.Path]:
     if fallback.is_dir() and fallback not in roots:
         roots.append(fallback)
     return roots
+
+
+def _is_source_folder(folder: pathlib.Path) -> bool:
+    """An FMU's source folder (a modelDescription.xml) or a system's (a SystemStructure.ssd)."""
+    return (folder / _DESCRIPTIONS[2]).is_file() or (folder / _SSD).is_file()
+
+
+def _ssd_component_sources(ssd: pathlib.Path) -> list[str]:
+    """The distinct ``resources/<id>.fmu`` sources of the components of a system's .ssd, each with its folder."""
+    try:
+        tree = ET.parse(ssd)
+    except ET.ParseError as exc:
+        raise BuildError(f"{ssd} is not valid XML: {exc}") from None
+    sources: list[str] = []
+    for component in tree.getroot().iter(_SSD_NS + "Component"):
+        what = f"component {component.get('name')!r} of {ssd}"
+        if component.get("type", _FMU_MIME) != _FMU_MIME:
+            raise BuildError(f"{what} is of type {component.get('type')!r}: only FMUs ({_FMU_MIME}) are built")
+        source = component.get("source") or ""
+        identifier = source[len("resources/"):-len(".fmu")] if re.fullmatch(r"resources/\w+\.fmu", source) else ""
+        if not _NAME_RE.fullmatch(identifier) or not (ssd.parent / identifier / _DESCRIPTIONS[2]).is_file():
+            raise BuildError(f"{what} has source={source!r}: expected 'resources/<id>.fmu' with the FMU's source "
+                             f"folder <id>/ (a {_DESCRIPTIONS[2]}) beside the .ssd")
+        if source not in sources:
+            sources.append(source)
+    if not sources:
+        raise BuildError(f"{ssd} has no components: nothing to build")
+    return sources
 
 
 def _c_sources(src: pathlib.Path) -> list[pathlib.Path]:
