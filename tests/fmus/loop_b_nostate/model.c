@@ -1,0 +1,77 @@
+/*
+ * loop_b (the same file in tests/fmus/loop_b_nostate): equations and checks. See model.h.
+ */
+#include "model.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+
+static ModelStatus fail(Model *m, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(m->msg, sizeof m->msg, fmt, ap);
+    va_end(ap);
+    return MODEL_ERROR;
+}
+
+void model_reset(Model *m) {
+    m->kb = -0.8;
+    m->c = 0.3;
+    m->w = 2.0; /* rad/s */
+    m->u = 0.0;
+    m->time = 0.0;
+    m->phase = PHASE_INSTANTIATED;
+    m->msg[0] = '\0';
+}
+
+ModelStatus model_get_real(Model *m, unsigned vr, double *value) {
+    switch (vr) {
+    case VR_TIME: *value = m->time; return MODEL_OK;
+    case VR_U: *value = m->u; return MODEL_OK;
+    case VR_Y: *value = m->kb * m->u + m->c * sin(m->w * m->time); return MODEL_OK; /* from the input set last */
+    case VR_KB: *value = m->kb; return MODEL_OK;
+    case VR_C: *value = m->c; return MODEL_OK;
+    case VR_W: *value = m->w; return MODEL_OK;
+    default: return fail(m, "no Real variable has value reference %u", vr);
+    }
+}
+
+ModelStatus model_set_real(Model *m, unsigned vr, double value) {
+    const int before_init = m->phase == PHASE_INSTANTIATED || m->phase == PHASE_INITIALIZATION;
+    if (!isfinite(value)) return fail(m, "value reference %u: %g is not finite", vr, value);
+    switch (vr) {
+    case VR_U: m->u = value; return MODEL_OK;
+    case VR_KB:
+    case VR_C:
+    case VR_W:
+        if (!before_init) return fail(m, "the parameters are fixed: set them before initialization");
+        if (vr == VR_KB) m->kb = value;
+        else if (vr == VR_C) m->c = value;
+        else m->w = value;
+        return MODEL_OK;
+    default: return fail(m, "value reference %u cannot be set", vr);
+    }
+}
+
+ModelStatus model_enter_initialization(Model *m, double start_time) {
+    if (m->phase != PHASE_INSTANTIATED) return fail(m, "initialization only follows instantiation or reset");
+    m->time = start_time;
+    m->phase = PHASE_INITIALIZATION;
+    return MODEL_OK;
+}
+
+ModelStatus model_exit_initialization(Model *m) {
+    if (m->phase != PHASE_INITIALIZATION) return fail(m, "not in Initialization Mode");
+    m->phase = PHASE_STEPPING;
+    return MODEL_OK;
+}
+
+ModelStatus model_do_step(Model *m, double t, double h) {
+    if (m->phase != PHASE_STEPPING) return fail(m, "doStep: only allowed after initialization");
+    if (!isfinite(h) || h < 0.0) return fail(m, "doStep: step size %g must be >= 0", h);
+    if (fabs(t - m->time) > 1e-9 * (fabs(t) > 1.0 ? fabs(t) : 1.0))
+        return fail(m, "doStep: communication point %.17g differs from the model time %.17g", t, m->time);
+    m->time = t + h; /* nothing else moves */
+    return MODEL_OK;
+}
