@@ -3,7 +3,8 @@
 The toolkit is a house with a room per pipeline stage, and imports flow one way, from the apps down to the
 plant (docs/architecture.md draws the arrows):
 
-* :mod:`cosim.plant` - FMUs built from C (:func:`build_fmu`) and stepped (:class:`FmuPlant`);
+* :mod:`cosim.plant` - FMUs built from C (:func:`build_fmu`) and stepped (:class:`FmuPlant`), systems of FMUs
+  (SSP, OSP or :class:`System`) run by a co-simulation master (:class:`SystemPlant`);
 * :mod:`cosim.data` - records (:class:`Trajectory`), measured files, excitation :mod:`~cosim.data.signals`,
   FMU simulation (:func:`simulate`);
 * :mod:`cosim.identify` - SINDYc (:class:`SINDYc`) and the :class:`IdentifiedModel`;
@@ -48,6 +49,8 @@ from .errors import (
 from .plant.build import build_fmu, fmu_cache_dir
 from .plant.fmu_plant import FmuPlant
 from .plant.model_description import open_model_description
+from .plant.system_plant import SystemPlant
+from .plant.system_structure import System, read_system
 
 __version__ = "0.1.0"
 
@@ -118,11 +121,14 @@ __all__ = [
     "InvalidSettingError",
     "SignalSpecError",
     "SpecError",
+    "System",
+    "SystemPlant",
     "Trajectory",
     "UnknownVariableError",
     "build_fmu",
     "fmu_cache_dir",
     "open_model_description",
+    "read_system",
     "signals",
     "simulate",
     *_LAZY,

@@ -98,6 +98,12 @@ def test_the_tour_runs_from_a_fresh_folder(tmp_path, cluster, monkeypatch):
     mat = scipy.io.loadmat(tmp_path / "replay.mat")
     for name in data.columns:
         np.testing.assert_array_equal(mat[name].ravel(), pd.read_csv(tmp_path / "replay.csv")[name])
+    # the split servo, a system of two FMUs: its columns named component.variable, its motor near the one-FMU servo's
+    split = pd.read_csv(tmp_path / "split.csv")
+    assert list(split.columns) == ["time", "motor.Tm", "motor.theta_m", "motor.omega_m", "load.Tc", "load.theta_L",
+                                   "load.omega_L"]
+    replay = pd.read_csv(tmp_path / "replay.csv")  # the one-FMU servo under the same torque, without noise
+    np.testing.assert_allclose(split["motor.theta_m"], replay["theta_m"], atol=1e-3 * np.ptp(replay["theta_m"]))
     # any FMU: validate's checks come from the plant and the design, said with their reasons
     exported = next(out for line, out in outputs.items() if line.startswith("cosim validate model.fmu"))
     assert exported.startswith("PASSED") and "input_limit<=5000: the controller's limit on Tm" in exported

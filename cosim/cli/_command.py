@@ -3,14 +3,18 @@
 * :func:`_friendly` - a command's library errors become one ``error: ...`` line on stderr and an exit status
   (:data:`EXIT_RESULT`, :data:`EXIT_INPUT`, :data:`EXIT_INTERNAL`), its warnings one ``warning: ...`` line;
 * :func:`_deprecated` - an old option spelling that still works says so, once, on stderr;
-* :func:`_emit` - the result as text, or as one JSON object with ``--json``;
+* :func:`_emit` - the result as text, or as one JSON object with ``--json`` (while a ``--json`` command runs, what
+  FMUs print to the process's standard output goes to stderr: :func:`_fmu_prints_to_stderr`);
 * :func:`_pairs`, :func:`_names`, :func:`_ranges` - ``NAME=VALUE``, ``A,B,...`` and ``NAME=LOW:HIGH`` options;
-* :func:`_resolve_fmu` - an FMU argument: a path, or ``bundled`` / ``bundled3`` for the bundled servo.
+* :func:`_resolve_fmu` - an FMU argument: a path, ``bundled`` / ``bundled3`` for the bundled servo, ``bundled-split``
+  for it split into two FMUs (an ``.ssp``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
 import json
 import os
 import sys
@@ -33,12 +37,48 @@ EXIT_INPUT = 2
 EXIT_INTERNAL = 70
 
 
+#: The process's standard output while :func:`_fmu_prints_to_stderr` sends file descriptor 1 to stderr.
+_JSON_STREAM: list[Any] = []
+
+
 def _emit(as_json: bool, payload: dict[str, Any], text: str) -> None:
     """Print `payload` as one JSON object with ``--json``, else `text`."""
     if as_json:
-        click.echo(json.dumps(payload, default=float))
+        if _JSON_STREAM:
+            _JSON_STREAM[-1].write(json.dumps(payload, default=float) + "\n")
+            _JSON_STREAM[-1].flush()
+        else:
+            click.echo(json.dumps(payload, default=float))
     else:
         click.echo(text)
+
+
+@contextlib.contextmanager
+def _fmu_prints_to_stderr():
+    """Send file descriptor 1 to stderr for the duration, keeping the real standard output for :func:`_emit`.
+
+    FMUs print from C (the OSP quarter truck's banners, logging FMUs): on stdout those lines would break a
+    ``--json`` result that scripts parse. Where stdout has no file descriptor (click's test runner), nothing
+    changes.
+    """
+    try:
+        out_fd, err_fd = sys.stdout.fileno(), sys.stderr.fileno()
+    except (AttributeError, OSError, io.UnsupportedOperation, ValueError):
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(out_fd)
+    stream = os.fdopen(os.dup(saved), "w")
+    os.dup2(err_fd, out_fd)
+    _JSON_STREAM.append(stream)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, out_fd)
+        os.close(saved)
+        _JSON_STREAM.pop()
+        stream.close()
 
 
 def _friendly(func: Callable) -> Callable:
@@ -49,7 +89,8 @@ def _friendly(func: Callable) -> Callable:
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), (_fmu_prints_to_stderr() if kwargs.get("as_json")
+                                             else contextlib.nullcontext()):
                 warnings.showwarning = _one_line_warning
                 # Python hides DeprecationWarnings outside __main__; a command's user must see an old spelling's
                 warnings.simplefilter("default", CosimDeprecationWarning)
@@ -126,11 +167,16 @@ def _settings(items: tuple[str, ...], option: str) -> dict[str, Any]:
 
 
 def _resolve_fmu(path: str) -> Path:
-    """`bundled` (or `bundled3` for FMI 3.0) names the bundled two-mass servo FMU."""
+    """`bundled` (or `bundled3` for FMI 3.0) names the bundled two-mass servo FMU; `bundled-split` the same servo
+    as two FMUs wired by an SSP file (fmus/two_mass_servo_split)."""
     if path in ("bundled", "bundled3"):
         from ..plant.build import build_fmu
 
         return build_fmu(fmi_version="3.0" if path == "bundled3" else "2.0")
+    if path == "bundled-split":
+        from ..plant.build import build_ssp
+
+        return build_ssp()
     return Path(path)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import click
@@ -64,8 +65,12 @@ def fmu_info(path: str, show_all: bool, inputs: tuple[str, ...], input_file: str
     """
     from ..plant._variables import NUMERIC, expand_signals, shape_of
     from ..plant.model_description import open_model_description
+    from ..plant.system_structure import is_system_file
 
     fmu_path = _resolve_fmu(path)
+    if is_system_file(fmu_path):
+        _system_info(fmu_path, as_json)
+        return
     md = open_model_description(fmu_path)
     driven = _driven(fmu_path, [s for s in expand_signals(md.modelVariables).values() if s.var.causality == "input"
                                 and s.kind in NUMERIC and not (s.shape and s.offset is None)], inputs, input_file)
@@ -112,6 +117,42 @@ def fmu_info(path: str, show_all: bool, inputs: tuple[str, ...], input_file: str
                          + (f"; leaves {', '.join(driven[1])} to the FMU (start value set once)" if driven[1]
                             else ""))
     lines.append(f"  states: {', '.join(states) or 'not declared'}")
+    _emit(as_json, info, "\n".join(lines))
+
+
+def _system_info(path: Any, as_json: bool) -> None:
+    """``cosim fmu info`` of a system of FMUs: its components, connections, free inputs, outputs, the order a
+    Gauss-Seidel master steps them in, and the loops found."""
+    from ..plant.system_structure import read_system
+    from ..plant.system_wiring import wire
+
+    system = read_system(path)
+    w = wire(system)
+    comps = [{"name": n, "fmu": str(c.source), "model": w.descriptions[n].modelName,
+              "fmi_version": w.descriptions[n].fmiVersion, "kind": w.kinds[n], "step_multiple": c.step_multiple,
+              "parameters": {k: v for k, v in c.parameters.items()}} for n, c in system.components.items()]
+    links = [{"from": f"{lk.start[0]}.{lk.start[1]}", "to": f"{lk.end[0]}.{lk.end[1]}", "factor": lk.factor,
+              "offset": lk.offset} for lk in w.links]
+    info = {"path": str(path), "system": system.name, "components": comps, "connections": links,
+            "inputs": list(w.inputs), "outputs": list(w.outputs), "order": list(w.order),
+            "loops": [list(x) for x in w.loops], "possible_loops": [list(x) for x in w.possible_loops],
+            "default_step": system.dt}
+    lines = [f"{system.name}: a system of {len(comps)} FMUs", f"  file: {path}", "  components:"]
+    for c in comps:
+        every = f", every {c['step_multiple']} steps" if c["step_multiple"] > 1 else ""
+        bound = f"; sets {', '.join(f'{k}={v}' for k, v in c['parameters'].items())}" if c["parameters"] else ""
+        lines.append(f"    {c['name']:<12} {Path(c['fmu']).name} (FMI {c['fmi_version']}, {c['kind']}{every}){bound}")
+    lines.append("  connections:")
+    for lk in links:
+        scale = "" if (lk["factor"], lk["offset"]) == (1.0, 0.0) else f"  (x {lk['factor']:g} + {lk['offset']:g})"
+        lines.append(f"    {lk['from']} -> {lk['to']}{scale}")
+    lines.append(f"  free inputs: {', '.join(w.inputs) or 'none'}")
+    lines.append(f"  outputs: {', '.join(w.outputs)}")
+    lines.append(f"  Gauss-Seidel order: {', '.join(w.order)}")
+    loops = [" -> ".join((*x, x[0])) for x in w.loops]
+    maybe = [" -> ".join((*x, x[0])) for x in w.possible_loops]
+    lines.append(f"  algebraic loops: {'; '.join(loops) or 'none'}"
+                 + (f"; possible through undeclared output dependencies: {'; '.join(maybe)}" if maybe else ""))
     _emit(as_json, info, "\n".join(lines))
 
 

@@ -61,7 +61,8 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
              as_json: bool) -> None:
     """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
 
-    PATH is an .fmu file, or `bundled` for the bundled servo.
+    PATH is an .fmu file, `bundled` for the bundled servo, or a system of FMUs (an .ssp, a SystemStructure.ssd,
+    an OspSystemStructure.xml) whose variables are named component.variable (--set load.JL=500).
 
     \b
     Example:
@@ -128,8 +129,9 @@ def _start_values(fmu_path: Path, sets: dict, starts: dict) -> tuple[dict, dict]
     a state: ``--set Binary_input=626172``), with the ``--start`` values."""
     from ..plant._variables import expand_signals
     from ..plant.model_description import open_model_description
+    from ..plant.system_structure import is_system_file
 
-    if not sets:
+    if not sets or is_system_file(fmu_path):  # a system sorts its components' values itself
         return sets, starts
     signals = expand_signals(open_model_description(fmu_path).modelVariables)
     moved = {name: value for name, value in sets.items()
@@ -164,9 +166,14 @@ def _recorded(fmu_path: Path, input_file: str, time_column: str | None, hold: st
     from ..data.simulation import recorded_inputs, steps_for
     from ..plant._variables import NUMERIC, expand_signals
     from ..plant.model_description import open_model_description
+    from ..plant.system_structure import is_system_file, read_system
+    from ..plant.system_wiring import wire
 
-    names = [s.name for s in expand_signals(open_model_description(fmu_path).modelVariables).values()
-             if s.var.causality == "input" and s.kind in NUMERIC and not (s.shape and s.offset is None)]
+    if is_system_file(fmu_path):
+        names = list(wire(read_system(fmu_path)).inputs)
+    else:
+        names = [s.name for s in expand_signals(open_model_description(fmu_path).modelVariables).values()
+                 if s.var.causality == "input" and s.kind in NUMERIC and not (s.shape and s.offset is None)]
     expressions = {name: text for name, text in given.items() if not _is_signal_spec(text)}
     variables = file_variables(input_file)
     found = [n for n in names if n in variables and n not in expressions]

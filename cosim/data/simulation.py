@@ -31,10 +31,12 @@ from ..numbers import WrittenNumber, check_memory
 from ..plant._variables import kind_of
 from ..plant.fmu_plant import FmuPlant
 from ..plant.model_description import variable_unit
+from ..plant.system_plant import SystemPlant
+from ..plant.system_structure import is_system_file
 from .signals import Signal, parse_signal
 from .trajectory import Trajectory
 
-__all__ = ["HOLDS", "simulate", "InputSpec", "recorded_inputs", "sample_input"]
+__all__ = ["HOLDS", "InputSpec", "open_plant", "recorded_inputs", "sample_input", "simulate"]
 
 #: What an input can be given as: a Signal (or any callable of time), a constant, samples at the
 #: communication points, or a signal spec string such as ``"square:amp=500,freq=2"``.
@@ -99,7 +101,18 @@ def sample_input(name: str, spec: InputSpec, t: np.ndarray, *, maximum: float | 
     return values
 
 
-def _written(plant: FmuPlant, values: Mapping[str, Any] | None) -> dict[str, Any]:
+def open_plant(path: str | os.PathLike, *, kind: str | None = None, solver: str = "cvode",
+               t0: float | None = None, **options: Any) -> FmuPlant | SystemPlant:
+    """An FMU as :class:`~cosim.plant.fmu_plant.FmuPlant`, or a system of FMUs (``.ssp``, ``.ssd``, an OSP
+    ``...SystemStructure.xml``) as :class:`~cosim.plant.system_plant.SystemPlant`, with the same options."""
+    if is_system_file(path):
+        if kind not in (None, "cs"):
+            raise InvalidSettingError(f"kind={kind!r} is for one FMU; a system's components say their own interface")
+        return SystemPlant(path, solver=solver, t0=0.0 if t0 is None else t0, **options)
+    return FmuPlant(path, kind=kind, solver=solver, t0=t0, **options)
+
+
+def _written(plant: FmuPlant | SystemPlant, values: Mapping[str, Any] | None) -> dict[str, Any]:
     """Start values as the record's meta keeps them (JSON): a Binary's bytes as their hex digits, a number read from
     text (:class:`~cosim.numbers.WrittenNumber`) as that text where the variable takes text."""
     out = {}
@@ -166,7 +179,9 @@ def simulate(
     Parameters
     ----------
     fmu : path-like
-        The FMU (FMI 2.0 or 3.0 co-simulation).
+        The FMU (FMI 2.0 or 3.0), or a system of FMUs (``.ssp``, ``SystemStructure.ssd``,
+        ``OspSystemStructure.xml``: :class:`~cosim.plant.system_plant.SystemPlant`, its names
+        ``component.variable``).
     inputs : mapping, optional
         Input name -> :data:`InputSpec`: the inputs driven. An input not named is left to the FMU: its start value
         (the FMU's, or one given in `start`) is set once and never again.
@@ -214,8 +229,8 @@ def simulate(
     named = len(outputs) if isinstance(outputs, (list, tuple)) else 0
     check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
-    with FmuPlant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, inputs=list(inputs), outputs=outputs,
-                  kind=kind, solver=solver) as plant:
+    with open_plant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, inputs=list(inputs), outputs=outputs,
+                    kind=kind, solver=solver) as plant:
         check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
                      what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
                      hint="use a larger dt, a shorter duration or fewer outputs")
@@ -257,7 +272,7 @@ def simulate(
         types = plant.types
         units = {name: variable_unit(plant.variable(name)) for name in names}
         meta = {
-            "source": "fmu",
+            "source": "system" if plant.kind == "system" else "fmu",
             "fmu": plant.path.name,
             "model": plant.model_description.modelName,
             "fmi_version": plant.fmi_version,
