@@ -374,3 +374,25 @@ def test_plants_opened_at_once_in_threads_leave_the_working_directory_alone(fmu,
         speeds = list(pool.map(run, range(80)))
     assert Path.cwd() == tmp_path
     assert speeds == [run(k) for k in range(80)]  # every plant loaded and stepped as it does alone
+
+
+@pytest.mark.parametrize("fmi_version", ["2.0", "3.0"])
+def test_the_c_step_gives_the_python_steps_bits(fmi_version, monkeypatch):
+    """FmuPlant's step and run through the system master's C loop (one ctypes call a step, one a run) against its
+    Python step (three ctypes calls a step): the same outputs to the bit, the same time after."""
+    from cosim.plant import _system_engine
+
+    rng = np.random.default_rng(3)
+    u = np.c_[rng.normal(0.0, 500.0, 400), rng.normal(0.0, 50.0, 400)]
+    parameters = {"Fc": 30.0, "Tcog": 5.0, "ncog": 12, "backlash": 1e-4, "delay": 0.0015}
+    results = []
+    for python in (False, True):
+        if python:
+            monkeypatch.setattr(_system_engine, "single_loop", lambda plant: None)
+        with FmuPlant(build_fmu(fmi_version=fmi_version), dt=1e-3, parameters=parameters) as plant:
+            assert (plant._loop is None) == python
+            stepped = np.array([plant.step(row) for row in u[:200]])
+            ran = plant.run(u[200:])
+            results.append((stepped, ran, plant.time))
+    assert np.array_equal(results[0][0], results[1][0]) and np.array_equal(results[0][1], results[1][1])
+    assert results[0][2] == results[1][2] == pytest.approx(0.4)

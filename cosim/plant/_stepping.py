@@ -63,6 +63,7 @@ class _Stepping:
         y_view = np.frombuffer(y_buf, dtype=np.float64)
         self._y_view = y_view
         self._n_in = n_in
+        self._loop = None  # the C loop (below): only for co-simulation FMUs with 64-bit float inputs and outputs
         if self.kind == "me":  # a Model Exchange FMU: integrated in Python by FMPy's solvers, no doStep to bind
             self._get_name = "get outputs"
             self._bind_typed_path(self._advance_model_exchange)
@@ -148,6 +149,24 @@ class _Stepping:
                 status = get_real(*get_args)
                 if status > 1:
                     fail(names[2], status, t + dt)
+                counter[0] = k + 1
+                return y_view.copy()
+
+        from ._system_engine import single_loop
+
+        loop = single_loop(self)  # set, doStep and get in one call of the system master's C loop, where it builds
+        self._loop = loop
+        if loop is not None:
+            call, args, loop_fail = loop.call, loop.args, loop.fail
+
+            def step(u: Sequence[float]) -> np.ndarray:  # noqa: F811 - the same step, its three calls in C
+                try:
+                    u_buf[:] = u
+                except (ValueError, TypeError):
+                    bad_input(u)
+                k = counter[0]
+                if call(*args) != 1:  # a call failed, or an input is not finite: raised as above
+                    loop_fail(k)
                 counter[0] = k + 1
                 return y_view.copy()
 

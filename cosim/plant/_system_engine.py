@@ -170,3 +170,62 @@ class CEngine:
         calls = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if p.fmi_version == "2.0" else (
             "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
         p._raise_call_error(calls[m.failed_call], m.status, m.failed_time)
+
+
+class SingleLoop:
+    """One co-simulation FMU's steps through the same C loop: :class:`~cosim.plant.fmu_plant.FmuPlant`'s fast path
+    (``set``, ``doStep`` and ``get`` in one ctypes call instead of three; bulk runs in one call for all steps).
+
+    `call(*args)` steps once from the plant's input buffer into its output buffer and returns 1, or 0 when a call
+    failed (then :meth:`fail` raises what FmuPlant's Python step raises)."""
+
+    def __init__(self, plant: Any) -> None:
+        self.plant = plant
+        self._keep: list[Any] = []
+        y = np.frombuffer(plant._y_buf, dtype=np.float64)
+        n_in, n_out = len(plant.inputs), len(plant.outputs)
+        comp = _component(plant, [("free", i) for i in range(n_in)], {}, 1, False, y, self._keep)
+        self.comps = (_Comp * 1)(comp)
+        zero = np.zeros(1, dtype=np.intc)
+        self.pick_index = np.arange(n_out, dtype=np.intc)
+        self.pick_comp = np.zeros(n_out, dtype=np.intc)
+        self._keep += [zero, self.comps, self.pick_index, self.pick_comp]
+        self.master = _Master(1, 0, 0, plant._counter[0], plant.t0, plant.dt, self.comps, _pointer(zero, _I),
+                              _pointer(zero, _I), -1, -1, 0, 0.0)
+        self.call = _library()["cosim_master_run"]  # a function object of its own: no argtypes, nothing converted
+        self.call.restype = ctypes.c_long
+        self.call.argtypes = None
+        self.args = (ctypes.byref(self.master), ctypes.c_long(1), ctypes.cast(plant._u_buf, _D), ctypes.c_int(n_in),
+                     ctypes.cast(plant._y_buf, _D), ctypes.c_int(n_out), _pointer(self.pick_comp, _I),
+                     _pointer(self.pick_index, _I))
+
+    def run(self, u: np.ndarray, y: np.ndarray) -> int:
+        """Steps for the rows of `u` (C-contiguous, finite checked by C) into the rows of `y`; the steps done."""
+        p = self.plant
+        return self.call(ctypes.byref(self.master), ctypes.c_long(u.shape[0]), _pointer(u, _D),
+                         ctypes.c_int(u.shape[1]), _pointer(y, _D), ctypes.c_int(len(p.outputs)),
+                         _pointer(self.pick_comp, _I), _pointer(self.pick_index, _I))
+
+    def fail(self, k: int) -> None:
+        """Raise as FmuPlant's Python step does for the call that failed at its step `k`."""
+        p, m, c = self.plant, self.master, self.comps[0]
+        t = p.t0 + k * p.dt
+        m.k = c.k = k  # where the step failed (FmuPlant's counter says the same)
+        if m.status == -2:
+            p._nonfinite_input(t)
+        v2 = p.fmi_version == "2.0"
+        names = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep",
+                                                                         "fmi3GetFloat64")
+        if m.failed_call == 1:
+            if not v2:  # the flags FmuPlant._ended reads, as its Python step would have left them
+                flags, last_time = p._step_flags
+                flags[1].value, flags[2].value, last_time.value = c.terminated, c.early, c.last_time
+            p._ended(m.status, t)
+        p._raise_call_error(names[m.failed_call], m.status, t + (p.dt if m.failed_call == 2 else 0.0))
+
+
+def single_loop(plant: Any) -> SingleLoop | None:
+    """The C fast path of a co-simulation FMU with 64-bit float inputs and outputs, or None (no compiler)."""
+    if sys.platform.startswith("win") or _library() is None:
+        return None
+    return SingleLoop(plant)

@@ -27,7 +27,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..errors import InvalidSettingError, UnknownVariableError
+from ..errors import CosimError, InvalidSettingError, UnknownVariableError
 from ._variables import NUMERIC, expand_signals
 from .model_description import _close_matches, interface_kind, open_model_description, variable_unit
 from .system_structure import Connection, System, split_name
@@ -81,8 +81,11 @@ def wire(system: System) -> Wiring:
     """
     mds, kinds, signals = {}, {}, {}
     for name, comp in system.components.items():
-        md = open_model_description(comp.source, comp.kind)
-        mds[name], kinds[name] = md, interface_kind(md, comp.kind)
+        try:
+            md = open_model_description(comp.source, comp.kind)
+            mds[name], kinds[name] = md, interface_kind(md, comp.kind)
+        except CosimError as exc:  # the same error, saying which component: a system may hold many FMUs
+            raise type(exc)(f"component {name}: {exc}") from None
         signals[name] = expand_signals(md.modelVariables)
     units = _unit_table(system, mds)
     links = []
