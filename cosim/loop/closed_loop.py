@@ -46,10 +46,12 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
+from ..data.simulation import open_plant
 from ..data.trajectory import Trajectory
 from ..errors import ControllerError, CosimError, InvalidSettingError, SimulationTerminated, UnknownVariableError
 from ..plant.fmu_plant import FmuPlant
 from ..plant.model_description import variable_unit
+from ..plant.system_plant import SystemPlant
 from .response import jsonable_metrics, response_metrics
 
 __all__ = ["ClosedLoopResult", "ModelPlant", "closed_loop"]
@@ -388,7 +390,7 @@ def closed_loop(controller: Any, plant: FmuPlant | str | Any, *, duration: float
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise InvalidSettingError(f"duration must be a positive number of seconds, got {duration!r}")
     n = max(1, int(round(duration / dt)))
-    own = not isinstance(plant, FmuPlant)
+    own = not isinstance(plant, (FmuPlant, SystemPlant))
     fmu = _open(plant, controller, disturbance, dt=dt, parameters=parameters, start=start, kind=kind) if own else plant
     try:
         if not own:
@@ -411,7 +413,7 @@ def _open(path: Any, controller: Any, disturbance: Mapping[str, Any] | None, **o
         raise InvalidSettingError(f"{twice[0]!r} is driven by the controller; a disturbance goes on another input")
     driven = list(dict.fromkeys([*controller.inputs, *(disturbance or {})]))
     try:
-        return FmuPlant(path, inputs=driven, **options)
+        return open_plant(path, inputs=driven, **options)
     except UnknownVariableError as exc:
         raise UnknownVariableError(f"the loop drives {', '.join(driven)} (the controller's inputs, then the "
                                    f"disturbances): {exc}") from None

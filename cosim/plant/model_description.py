@@ -61,7 +61,9 @@ def open_model_description(fmu: str | os.PathLike, kind: str | None = None) -> M
     Parameters
     ----------
     fmu : path-like
-        Path of the ``.fmu`` file.
+        Path of the ``.fmu`` file; or of a system of FMUs (``.ssp``, ``SystemStructure.ssd``, an OSP
+        ``...SystemStructure.xml``), described as one FMU whose variables are ``component.variable``
+        (:func:`cosim.plant.system_wiring.description`).
     kind : {"cs", "me"}, optional
         The interface to check (see :func:`interface_kind`); default: co-simulation, else Model Exchange.
 
@@ -81,6 +83,13 @@ def open_model_description(fmu: str | os.PathLike, kind: str | None = None) -> M
     'two_mass_servo'
     """
     path = Path(fmu)
+    from .system_structure import is_system_file
+
+    if is_system_file(path):
+        from .system_structure import read_system
+        from .system_wiring import description, wire
+
+        return description(wire(read_system(path)))
     if not path.exists():
         raise FmuNotFoundError(f"FMU not found: {path}; check the path (`cosim fmu build` prints the bundled one)")
     if path.is_dir() or not zipfile.is_zipfile(path):

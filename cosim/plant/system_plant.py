@@ -42,7 +42,6 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -51,7 +50,7 @@ from ..errors import InvalidSettingError, SimulationTerminated
 from . import _algebraic_loops
 from .fmu_plant import FmuPlant
 from .system_structure import System, read_system, split_name
-from .system_wiring import Wiring, check_names, wire
+from .system_wiring import Wiring, check_names, description, wire
 
 __all__ = ["ALGORITHMS", "SystemPlant"]
 
@@ -146,6 +145,7 @@ class SystemPlant:
             raise InvalidSettingError(f"engine={engine!r}; choose auto, c or python")
         self._engine_asked = engine
         self._plants: dict[str, FmuPlant] = {}
+        self._description = None
         try:
             self._open()
         except BaseException:
@@ -443,8 +443,11 @@ class SystemPlant:
         return "/".join(sorted({p.fmi_version for p in self._plants.values()}))
 
     @property
-    def model_description(self) -> SimpleNamespace:
-        return SimpleNamespace(modelName=self.system.name)
+    def model_description(self) -> Any:
+        """The system described as one FMU (:func:`cosim.plant.system_wiring.description`)."""
+        if self._description is None:
+            self._description = description(self.wiring)
+        return self._description
 
     @property
     def components(self) -> dict[str, FmuPlant]:

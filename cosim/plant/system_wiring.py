@@ -254,3 +254,40 @@ def check_names(wiring: Wiring, names: list[str], role: str) -> None:
             sig = expand_signals(wiring.descriptions[comp].modelVariables).get(var)
             if sig is None:
                 raise UnknownVariableError(f"{n}: component {comp} has no variable {var}")
+
+
+def description(wiring: Wiring) -> Any:
+    """The system as one FMU's model description (an FMPy ``ModelDescription``), for everything that reads one:
+    every component variable under its ``component.variable`` name; the connected inputs become locals, so that
+    the inputs are the free ones; states keep their derivatives; units from every component's definitions. What
+    validation, robustness and the reports read of a plant (parameters, an input's declared range, units) then
+    reads the same of a system."""
+    import attrs
+    from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, Unknown
+
+    system = wiring.system
+    driven = {link.end for link in wiring.links}
+    copies: dict[int, Any] = {}
+    variables = []
+    for name, md in wiring.descriptions.items():
+        for v in md.modelVariables:
+            if v.causality == "independent" and variables:
+                continue  # one time variable
+            full = v.name if v.causality == "independent" else f"{name}.{v.name}"
+            causality = "local" if (name, v.name) in driven else v.causality
+            copies[id(v)] = attrs.evolve(v, name=full, causality=causality)
+            variables.append(copies[id(v)])
+    for md in wiring.descriptions.values():
+        for v in md.modelVariables:
+            if getattr(v, "derivative", None) is not None and id(v.derivative) in copies:
+                copies[id(v)].derivative = copies[id(v.derivative)]
+    outputs = [Unknown(index=0, variable=copies[id(o.variable)], dependencies=None)
+               for md in wiring.descriptions.values() for o in md.outputs]
+    units = {u.name: u for md in wiring.descriptions.values() for u in (md.unitDefinitions or [])}
+    versions = sorted({md.fmiVersion for md in wiring.descriptions.values()})
+    return ModelDescription(
+        fmiVersion="/".join(versions), modelName=system.name, description=f"a system of {len(system.components)} "
+        f"FMUs ({', '.join(system.components)})", generationTool="cosim (a system of FMUs)",
+        coSimulation=CoSimulation(modelIdentifier=system.name), modelVariables=variables, outputs=outputs,
+        unitDefinitions=list(units.values()),
+        defaultExperiment=DefaultExperiment(stepSize=str(system.dt)) if system.dt else None)
