@@ -43,16 +43,20 @@ def _name_values(text: str | None, option: str) -> dict[str, float] | None:
 @_friendly
 def export_command(model_path: str, targets: tuple[str, ...], dt: str | None, constant: str, op: str | None,
                    nsub: int, as_json: bool) -> None:
-    """Export an identified model to MATLAB, FMI or JSON.
+    """Export an identified model to MATLAB, FMI or JSON; or a controller (`cosim design`'s file) as an FMU.
 
     \b
     Example:
       cosim export model.json -o statespace.mat -o model.fmu
+      cosim export pid.json -o pid.fmu    # the PID as an FMI 2.0 FMU, to place beside the plant in an SSP
     """
     from ..export import export
     from ..identify.model import IdentifiedModel
 
     check_outputs({"-o/--output": targets}, {"-o/--output": _SUFFIXES})  # all of them, before any is written
+    if _is_controller_file(model_path):
+        _export_controller(model_path, targets, as_json)
+        return
     model = IdentifiedModel.load(model_path)
     step = parse_number(dt, what="--dt") if dt else None
     if step is not None and not step > 0:
@@ -80,6 +84,39 @@ def export_command(model_path: str, targets: tuple[str, ...], dt: str | None, co
             written.append(str(Path(target)))
     _emit(as_json, {"model": model_path, "written": written, "notes": notes},
           "\n".join([*(f"wrote {w}" for w in written), *(f"  {n}" for n in notes)]))
+
+
+def _is_controller_file(path: str) -> bool:
+    """Whether `path` is a controller file (``"format": "cosim.controller"``), not a model."""
+    import json
+
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8")).get("format") == "cosim.controller"
+    except (OSError, ValueError, AttributeError):
+        return False  # the model reader says what is wrong with it
+
+
+def _export_controller(path: str, targets: tuple[str, ...], as_json: bool) -> None:
+    """A PID controller file as an FMU (controllers.pid.fmu); other kinds and other formats refused in one line."""
+    from controllers.base import load_controller
+
+    bad = [t for t in targets if Path(t).suffix.lower() != ".fmu"]
+    if bad:
+        raise InvalidSettingError(f"{path} is a controller; a controller exports as an FMU (-o NAME.fmu), not "
+                                  f"{bad[0]}")
+    controller = load_controller(path)
+    if controller.kind != "pid":
+        raise InvalidSettingError(f"{path} is a {controller.kind} controller; cosim exports a PID as an FMU (the MPC "
+                                  "from its generated C is not done yet)")
+    from controllers.pid.fmu import export_fmu
+
+    written = []
+    with staged_outputs(targets) as staged:
+        for target, place in zip(targets, staged, strict=True):
+            export_fmu(controller, place, name=Path(target).stem)
+            written.append(str(Path(target)))
+    _emit(as_json, {"controller": path, "written": written, "notes": []},
+          "\n".join(f"wrote {w}: the {controller.kind} as an FMI 2.0 co-simulation FMU" for w in written))
 
 
 def _operating_point(model: Any, point: dict[str, float] | None) -> tuple[dict, dict] | None:

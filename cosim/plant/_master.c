@@ -29,6 +29,8 @@ typedef struct {
     const double *src_factor, *src_offset;
     bool terminated, early;       /* FMI 3: the FMU asked to end the simulation; it returned early */
     double last_time;             /* FMI 3: its last successful time */
+    int pre;                      /* an output answers a free input at once: settled before each step */
+    const int *src_hold;          /* per input: its source is held (a discrete output), not extrapolated */
 } Comp;
 
 typedef struct {
@@ -61,7 +63,11 @@ static double input_value(const Master *m, const Comp *c, int i, const double *u
     if (c->src_kind[i] == 0) return u_free[c->src_index[i]];
     const Comp *s = &m->comps[c->src_comp[i]];
     int index = c->src_index[i], p = m->extrapolation;
-    if (at_end || p == 0) {
+    if (c->src_hold[i] && !at_end) {  /* a discrete signal: its value at the step's start */
+        int a = s->n_hist - 1;
+        while (a > 0 && s->hist_t[a] > t) a--;
+        value = s->hist_y[a * s->n_out + index];
+    } else if (at_end || p == 0) {
         value = (at_end || !m->jacobi) ? s->y[index] : s->hist_y[(s->n_hist - 1) * s->n_out + index];
     } else {
         int count = s->n_hist < p + 1 ? s->n_hist : p + 1, first = s->n_hist - count;
@@ -102,12 +108,13 @@ static int fail(Master *m, int comp, int call, int status, double t) {
     return -1;
 }
 
-/* The consistency pass: components with direct feedthrough given their inputs' newest values, read again. */
-static int settle(Master *m, const double *u_free) {
+/* The consistency pass: components with direct feedthrough given their inputs' newest values, read again
+ * (`pre`: only those answering a free input at once, before a step). */
+static int settle(Master *m, const double *u_free, int pre) {
     for (int a = 0; a < m->n; a++) {
         int ci = m->settle[a];
         Comp *c = &m->comps[ci];
-        if (!c->feedthrough) continue;
+        if (pre ? !c->pre : !c->feedthrough) continue;
         for (int i = 0; i < c->n_in; i++) c->u[i] = input_value(m, c, i, u_free, 0.0, 0.0, 1);
         int status = set_inputs(c, c->u);
         if (status > 1) return fail(m, ci, 0, status, m->t0 + m->k * m->dt);
@@ -122,14 +129,23 @@ static int settle(Master *m, const double *u_free) {
 static int master_step(Master *m, const double *u_free) {
     long k = m->k;
     double t = m->t0 + k * m->dt;
+    int any_pre = 0;
+    for (int a = 0; a < m->n; a++) any_pre |= m->comps[a].pre;
+    if (any_pre) {  /* step()'s inputs hold from t: what answers them at once, answers now */
+        if (settle(m, u_free, 1)) return -1;
+        for (int a = 0; a < m->n; a++) {
+            Comp *c = &m->comps[a];
+            if (c->pre && c->hist_t[c->n_hist - 1] == t)
+                for (int j = 0; j < c->n_out; j++) c->hist_y[(c->n_hist - 1) * c->n_out + j] = c->y[j];
+        }
+    }
     for (int a = 0; a < m->n; a++) {
         int ci = m->order[a];
         Comp *c = &m->comps[ci];
         if (k % c->multiple) continue;
         double h = (m->t0 + (k + c->multiple) * m->dt) - t;
-        int at_end = !m->jacobi && m->extrapolation == 0;
         for (int i = 0; i < c->n_in; i++) {
-            c->u[i] = input_value(m, c, i, u_free, t, h, at_end);
+            c->u[i] = input_value(m, c, i, u_free, t, h, 0);
             if (!isfinite(c->u[i])) return fail(m, ci, 0, -2, t);
         }
         int status = set_inputs(c, c->u);
@@ -155,7 +171,7 @@ static int master_step(Master *m, const double *u_free) {
             if (k % c->multiple == 0) push(c, m->t0 + (k + c->multiple) * m->dt);
         }
     m->k = k + 1;
-    if (settle(m, u_free)) return -1;
+    if (settle(m, u_free, 0)) return -1;
     for (int a = 0; a < m->n; a++) {  /* the settled values are the history's newest */
         Comp *c = &m->comps[m->order[a]];
         if (k % c->multiple == 0)

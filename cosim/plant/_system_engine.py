@@ -34,7 +34,8 @@ class _Comp(ctypes.Structure):
         ("instance", ctypes.c_void_p), ("set", ctypes.c_void_p), ("get", ctypes.c_void_p), ("step", ctypes.c_void_p),
         ("in_vr", _U), ("out_vr", _U), ("u", _D), ("y", _D), ("hist_t", _D), ("hist_y", _D),
         ("src_kind", _I), ("src_comp", _I), ("src_index", _I), ("src_factor", _D), ("src_offset", _D),
-        ("terminated", ctypes.c_bool), ("early", ctypes.c_bool), ("last_time", ctypes.c_double)]
+        ("terminated", ctypes.c_bool), ("early", ctypes.c_bool), ("last_time", ctypes.c_double),
+        ("pre", ctypes.c_int), ("src_hold", _I)]
 
 
 class _Master(ctypes.Structure):
@@ -84,9 +85,9 @@ def _pointer(array: np.ndarray, kind: Any) -> Any:
 
 
 def _component(p: Any, sources: list[tuple], index: dict[str, int], multiple: int, feedthrough: bool,
-               y: np.ndarray, keep: list[Any]) -> _Comp:
+               y: np.ndarray, keep: list[Any], pre: bool = False) -> _Comp:
     """The C loop's view of the FMU of `p` (a FmuPlant): its calls, buffers and where each input comes from
-    (`sources`: ``("free", position)`` or ``("link", component, output position, factor, offset)``)."""
+    (`sources`: ``("free", position)`` or ``("link", component, output position, factor, offset, held)``)."""
     v2 = p.fmi_version == "2.0"
     calls = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
     set_, step, get = (ctypes.cast(p._fmu.dll[c], ctypes.c_void_p).value for c in calls)
@@ -95,17 +96,19 @@ def _component(p: Any, sources: list[tuple], index: dict[str, int], multiple: in
     pos = np.array([s[1] if s[0] == "free" else s[2] for s in sources], dtype=np.intc)
     factor = np.array([1.0 if s[0] == "free" else s[3] for s in sources])
     offset = np.array([0.0 if s[0] == "free" else s[4] for s in sources])
+    hold = np.array([0 if s[0] == "free" else int(s[5]) for s in sources], dtype=np.intc)
     in_vr = np.array([p._vars[v].valueReference for v in p.inputs], dtype=np.uintc)
     out_vr = np.array([p._vars[v].valueReference for v in p.outputs], dtype=np.uintc)
     u = np.zeros(len(p.inputs))
     hist_t = np.array([p.t0, 0.0, 0.0])
     hist_y = np.zeros((3, len(p.outputs)))
     hist_y[0] = y
-    keep += [kind, comp, pos, factor, offset, in_vr, out_vr, u, y, hist_t, hist_y]
+    keep += [kind, comp, pos, factor, offset, hold, in_vr, out_vr, u, y, hist_t, hist_y]
     return _Comp(2 if v2 else 3, len(p.inputs), len(p.outputs), multiple, int(feedthrough), 1, p._counter[0], p.dt,
                  p._fmu.component, set_, get, step, _pointer(in_vr, _U), _pointer(out_vr, _U), _pointer(u, _D),
                  _pointer(y, _D), _pointer(hist_t, _D), _pointer(hist_y, _D), _pointer(kind, _I), _pointer(comp, _I),
-                 _pointer(pos, _I), _pointer(factor, _D), _pointer(offset, _D), False, False, 0.0)
+                 _pointer(pos, _I), _pointer(factor, _D), _pointer(offset, _D), False, False, 0.0, int(pre),
+                 _pointer(hold, _I))
 
 
 class CEngine:
@@ -120,7 +123,7 @@ class CEngine:
         for i, n in enumerate(names):
             # y: the master's own array, where Python reads the C loop's outputs
             comps[i] = _component(plant.components[n], plant._sources[n], index, plant.multiples[n],
-                                  plant._feedthrough[n], plant._y[n], self._keep)
+                                  plant._feedthrough[n], plant._y[n], self._keep, plant._pre[n])
         order = np.array([index[n] for n in plant._order], dtype=np.intc)
         settle = np.array([index[n] for n in plant.wiring.order], dtype=np.intc)
         self._pick_comp = np.array([index[c] for c, _ in plant._picks], dtype=np.intc)

@@ -96,6 +96,12 @@ class SystemPlant:
         Component -> whole number: it steps every that many communication steps (overrides the system file's).
     solver : {"cvode", "euler"}
         The solver of Model Exchange components.
+    hold_discrete : bool
+        A connection whose output or input its FMU declares ``variability="discrete"`` (a controller's command, a
+        sampled measurement: constant between communication points by their own declaration) carries the
+        source's value at the step's start, not extrapolated, also in Gauss-Seidel; default True. An FMU that
+        declares continuous signals discrete (the OSP quarter truck does) is coupled at first order then; False
+        treats every connection as continuous.
     engine : {"auto", "c", "python"}
         Who runs the steps: the compiled loop (:mod:`cosim.plant._system_engine`; the same bits, a fraction of
         the time), or Python. ``"auto"``: C where every component is a co-simulation FMU with 64-bit float
@@ -107,7 +113,7 @@ class SystemPlant:
                  parameters: Mapping[str, Any] | None = None, start: Mapping[str, Any] | None = None,
                  t0: float = 0.0, inputs: Sequence[str] | None = None, outputs: Sequence[str] | str | None = None,
                  step_multiples: Mapping[str, int] | None = None, solver: str = "cvode",
-                 engine: str = "auto") -> None:
+                 engine: str = "auto", hold_discrete: bool = True) -> None:
         self.system = system if isinstance(system, System) else read_system(system)
         self.path = Path(self.system.source or self.system.name)
         if algorithm not in ALGORITHMS:
@@ -141,6 +147,7 @@ class SystemPlant:
         self.outputs = tuple(self.wiring.outputs if outputs is None else outputs)
         self._settings = {"parameters": dict(parameters or {}), "start": dict(start or {})}
         self._solver = solver
+        self.hold_discrete = bool(hold_discrete)
         if engine not in ("auto", "c", "python"):
             raise InvalidSettingError(f"engine={engine!r}; choose auto, c or python")
         self._engine_asked = engine
@@ -200,11 +207,19 @@ class SystemPlant:
             for v in self._ins[n]:
                 lk = next((lk for lk in links_into[n] if lk.end[1] == v), None)
                 if lk is not None:
-                    src.append(("link", lk.start[0], self._plants[lk.start[0]].outputs.index(lk.start[1]),
-                                lk.factor, lk.offset))
+                    source = self._plants[lk.start[0]]
+                    hold = self.hold_discrete and "discrete" in (source.variable(lk.start[1]).variability,
+                                                                 self._plants[n].variable(v).variability)
+                    src.append(("link", lk.start[0], source.outputs.index(lk.start[1]), lk.factor, lk.offset, hold))
                 else:
                     src.append(("free", self.inputs.index(f"{n}.{v}")))
             self._sources[n] = src
+        # components with an output that answers a free input at once: given step()'s inputs before the step
+        self._pre = {}
+        for n in comps:
+            free = {v for v, src in zip(self._ins[n], self._sources[n], strict=True) if src[0] == "free"}
+            deps = [o.dependencies for o in w.descriptions[n].outputs if o.variable.name in wanted_out[n]]
+            self._pre[n] = bool(free) and any(d is None or any(x.name in free for x in d) for d in deps)
         self._picks = []
         for name in self.outputs:
             comp, var = split_name(name, comps)
@@ -240,7 +255,7 @@ class SystemPlant:
         self._k = 0
         self._u_free = np.array([self._free_start(n) for n in self.inputs], dtype=float)
         self._y = {n: p.read_outputs() for n, p in self._plants.items()}
-        self._settle(self._u_free, at_end=True)
+        self._settle(self._u_free)
         self._hist = {n: [(self._t0, self._y[n].copy())] for n in self._plants}
 
     def _free_start(self, name: str) -> float:
@@ -258,8 +273,10 @@ class SystemPlant:
             if src[0] == "free":
                 out.append(float(u_free[src[1]]))
                 continue
-            _, comp, index, factor, offset = src
-            if at_end or p == 0:
+            _, comp, index, factor, offset, hold = src
+            if hold and not at_end:  # a discrete signal: its value at the step's start, whoever stepped first
+                value = next(y[index] for tp, y in reversed(self._hist[comp]) if tp <= t)
+            elif at_end or p == 0:
                 value = self._y[comp][index] if at_end or self.algorithm == "gauss-seidel" else \
                     self._hist[comp][-1][1][index]
             else:
@@ -272,17 +289,20 @@ class SystemPlant:
             out.append(factor * value + offset)
         return out
 
-    def _settle(self, u_free: np.ndarray, *, at_end: bool) -> None:
+    def _settle(self, u_free: np.ndarray, only: dict[str, bool] | None = None) -> None:
         """Components with direct feedthrough given their inputs' newest values and read again, in order; an
-        algebraic loop's components solved together (:mod:`cosim.plant._algebraic_loops`)."""
+        algebraic loop's components solved together (:mod:`cosim.plant._algebraic_loops`). With `only`, just the
+        components it flags (before a step: those answering a free input at once)."""
         solved = set()
         for n in self.wiring.order:
+            if only is not None and not only[n]:
+                continue
             block = self._blocks.get(n)
             if block is not None:
                 if n not in solved:
                     _algebraic_loops.solve(self, block, u_free)
                     solved.update(block.components)
-            elif self._feedthrough[n]:
+            elif only is not None or self._feedthrough[n]:
                 plant = self._plants[n]
                 plant.set_inputs(self._input_values(n, u_free, 0.0, 0.0, at_end=True))
                 self._y[n][:] = plant.read_outputs()
@@ -309,14 +329,17 @@ class SystemPlant:
         """One communication step in Python (the C loop of :mod:`cosim.plant._system_engine` does the same)."""
         k = self._k
         t = self._t0 + k * self._dt
+        if any(self._pre.values()):  # step()'s inputs hold from t: what answers them at once, answers now
+            self._settle(u_free, self._pre)
+            for n, pre in self._pre.items():
+                h = self._hist[n]
+                if pre and h[-1][0] == t:
+                    h[-1] = (t, self._y[n].copy())
         stepped = [n for n in self._order if k % self.multiples[n] == 0]
         for n in stepped:
             m = self.multiples[n]
             h = (self._t0 + (k + m) * self._dt) - t
-            if self.algorithm == "jacobi":
-                values = self._input_values(n, u_free, t, h, at_end=False)
-            else:
-                values = self._gauss_seidel_values(n, u_free, t, h)
+            values = self._input_values(n, u_free, t, h, at_end=False)
             try:
                 self._y[n][:] = self._plants[n].step(values)
             except SimulationTerminated as exc:
@@ -328,17 +351,11 @@ class SystemPlant:
             for n in stepped:
                 self._push(n, self._t0 + (k + self.multiples[n]) * self._dt)
         self._k = k + 1
-        self._settle(u_free, at_end=True)
+        self._settle(u_free)
         for n in stepped:  # the settled values are the history's newest
             h = self._hist[n]
             h[-1] = (h[-1][0], self._y[n].copy())
         return self._collect()
-
-    def _gauss_seidel_values(self, n: str, u_free: np.ndarray, t: float, h: float) -> list[float]:
-        """Inputs of `n` for a Gauss-Seidel step: sources already at the step's end interpolate (their points
-        include it), the others extrapolate."""
-        return self._input_values(n, u_free, t, h, at_end=False) if self.extrapolation else \
-            self._input_values(n, u_free, t, h, at_end=True)
 
     def _push(self, n: str, t_end: float) -> None:
         h = self._hist[n]
