@@ -80,3 +80,34 @@ def test_the_exported_pid_passes_fmpys_validation_and_the_cli_exports_it(tmp_pat
     result = CliRunner().invoke(main, ["export", "pid.json", "-o", "pid.mat"], catch_exceptions=False)
     assert result.exit_code == 2 and "a controller exports as an FMU" in result.stderr
     assert not (tmp_path / "pid.mat").exists()
+
+
+@pytest.mark.parametrize("mass_version", ["2.0", "3.0"])
+def test_a_model_exchange_component_beside_the_pid_fmu_closes_the_python_loop(tmp_path, mass_version):
+    """Mixed interfaces and FMI versions in one system: the test's sliding mass as a Model Exchange FMU
+    (integrated by FMPy's CVode inside the plant room) under the exported PID (FMI 2.0 co-simulation): the loop of
+    cosim's closed loop with the Python PID on the same FMU."""
+    from pathlib import Path
+
+    from cosim import FmuPlant
+    from cosim.plant.build import build_fmu
+    from cosim.plant.system_structure import Component
+
+    mass = build_fmu("sliding_mass", source=Path(__file__).parent / "fmus" / "sliding_mass",
+                     fmi_version=mass_version)
+    controller = PID(kp=40.0, ki=20.0, kd=4.0, dt=0.01, inputs="extForce", outputs="mass.s", u_min=-50.0,
+                     u_max=50.0)
+    fmu = export_fmu(controller, tmp_path / "pid.fmu")
+    system = System({"mass": Component(mass, kind="me"), "pid": fmu},
+                    [("mass.mass.s", "pid.mass.s"), ("pid.extForce", "mass.extForce")])
+    n = 300
+    t = 0.01 * np.arange(n + 1)
+    with SystemPlant(system, dt=0.01, inputs=["pid.setpoint"], outputs=["mass.mass.s", "mass.mass.v"]) as loop:
+        assert loop.engine == "python" and "Model Exchange" in loop.engine_note
+        loop.set_inputs([reference(t[:1])[0]])
+        fmu_loop = np.vstack([loop.read_outputs(), loop.run(reference(t[:-1])[:, None])])
+    with FmuPlant(mass, dt=0.01, kind="me", inputs=["extForce"], outputs=["mass.s", "mass.v"]) as plant:
+        python_loop = closed_loop(controller, plant, duration=3.0, reference=reference, model=None).fmu
+    ours = np.c_[python_loop["mass.s"], python_loop["mass.v"]]
+    assert np.max(np.abs(fmu_loop - ours)) <= 1e-9 * np.ptp(ours)
+    assert python_loop["mass.s"][-1] > 0.007  # the loop took the mass most of the way to its set-point
