@@ -47,6 +47,8 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +59,7 @@ from .data.plots import plot_trajectory
 from .data.simulation import simulate
 from .data.trajectory import Trajectory
 from .diagnose import DiagnosisReport, diagnose
+from .errors import InvalidSettingError
 from .export import export_mat, to_statespace
 from .figures import COLOURS, FONT_SIZE, new_figure, save_figure
 from .identify.metrics import nrmse_fit_pct, r2
@@ -67,7 +70,7 @@ from .loop.plots import plot_closed_loop
 from .loop.response import jsonable_metrics
 from .loop.validation import TELESCOPE_SPECS, Verdict, disturbance_step, setpoint_step, validate
 from .loop.validation_report import fmu_text, verdict_summary
-from .plant.build import build_fmu
+from .plant.build import build_fmu, build_ssp
 from .report import Report, step_text
 from .study.paper import STATES, STUDY_DT
 
@@ -83,12 +86,51 @@ _LIMITS = {"u_min": -5000.0, "u_max": 5000.0}
 _STAGES = ("simulate", "identify", "diagnose", "control on the linear model", "control on the diagnosed model",
            "loop prediction", "report")
 
-__all__ = ["DEMO_EXCITATION", "DEMO_SCENARIOS", "DIAGNOSIS_WINDOW", "run_demo", "summary_lines"]
+__all__ = ["DEMO_EXCITATION", "DEMO_PLANTS", "DEMO_SCENARIOS", "DIAGNOSIS_WINDOW", "DemoPlant", "demo_plant",
+           "run_demo", "summary_lines"]
+
+#: The plants the demo runs on (``cosim demo --plant``).
+DEMO_PLANTS = ("bundled", "split")
+
+
+@dataclass(frozen=True)
+class DemoPlant:
+    """The plant of the demo: its file, what the report calls it, and its names of the one-FMU servo's signals and
+    parameters (``{"Tm": "motor.Tm", "Fc": "motor.Fc", ...}`` for the split servo; none for the bundled one)."""
+
+    path: Path
+    label: str
+    names: Mapping[str, str] = field(default_factory=dict)
+
+    def n(self, name: str) -> str:
+        """This plant's name of the one-FMU servo's `name`."""
+        return self.names.get(name, name)
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        return tuple(self.n(s) for s in STATES)
+
+    def scenarios(self) -> tuple[Any, ...]:
+        """:data:`DEMO_SCENARIOS`, the load step on this plant's load-torque input."""
+        return (DEMO_SCENARIOS[0], disturbance_step(500.0, input=self.n("TL"), at=0.3, duration=2.0))
+
+
+def demo_plant(kind: str = "bundled") -> DemoPlant:
+    """The demo's plant: ``"bundled"``, the two-mass servo FMU; ``"split"``, the same servo as a motor FMU and a
+    shaft-and-load FMU wired by an SSP file (fmus/two_mass_servo_split), run by cosim's system master."""
+    if kind == "bundled":
+        return DemoPlant(build_fmu(), "the bundled two-mass servo")
+    if kind == "split":
+        names = {n: f"motor.{n}" for n in ("Tm", "theta_m", "omega_m", "Fc")}
+        names.update({n: f"load.{n}" for n in ("TL", "theta_L", "omega_L")})
+        return DemoPlant(build_ssp(), "the bundled servo split into a motor FMU and a shaft-and-load FMU (an SSP "
+                         "system run by cosim's master)", names)
+    raise InvalidSettingError(f"plant {kind!r}; choose {' or '.join(DEMO_PLANTS)}")
 
 
 def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: float = 100.0,
              noise: float = 0.05, seed: int = 0, diagnosis_window: float | None = DIAGNOSIS_WINDOW,
-             progress: bool | None = None) -> dict[str, Any]:
+             progress: bool | None = None, plant: str = "bundled") -> dict[str, Any]:
     """Run the demo and write its files into `out_dir`; return a summary (paths and figures).
 
     Parameters
@@ -107,6 +149,9 @@ def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: flo
     progress : bool or None, default None
         Progress bars on stderr (the demo's stages, and the diagnosis's rounds). None shows them only when
         stderr is a terminal; True shows them anyway, False hides them.
+    plant : {"bundled", "split"}
+        The bundled servo FMU, or the same servo as two FMUs wired by an SSP file (:func:`demo_plant`): every
+        signal is then named ``component.variable`` (``load.theta_L``), the friction ``motor.Fc``.
 
     Returns
     -------
@@ -132,8 +177,8 @@ def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: flo
     # costs more in synchronisation than it gains; measured on 2 cores the diagnosis runs 3x faster this way
     with threadpool_limits(limits=1, user_api="blas"):
         with _stage_bar(progress) as bar:
-            return _run_demo(Path(out_dir), duration=duration, friction=friction, noise=noise, seed=seed,
-                             diagnosis_window=diagnosis_window, progress=progress, bar=bar)
+            return _run_demo(Path(out_dir), demo_plant(plant), duration=duration, friction=friction, noise=noise,
+                             seed=seed, diagnosis_window=diagnosis_window, progress=progress, bar=bar)
 
 
 def _stage_bar(progress: bool | None) -> Any:
@@ -151,15 +196,15 @@ def _advance(bar: Any, stage: str) -> None:
     bar.update()
 
 
-def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed: int,
+def _run_demo(out: Path, plant: DemoPlant, *, duration: float, friction: float, noise: float, seed: int,
               diagnosis_window: float | None, progress: bool | None, bar: Any) -> dict[str, Any]:
     started = time.perf_counter()
-    fmu = build_fmu()
-    excitation = {"Tm": DEMO_EXCITATION}
+    fmu, states, torque = plant.path, plant.states, plant.n("Tm")
+    excitation = {torque: DEMO_EXCITATION}
     steps = round(duration / STUDY_DT)
     duration = steps * STUDY_DT
     clean = simulate(fmu, excitation, duration=duration, dt=STUDY_DT)
-    effect = simulate(fmu, excitation, duration=duration, dt=STUDY_DT, parameters={"Fc": friction})
+    effect = simulate(fmu, excitation, duration=duration, dt=STUDY_DT, parameters={plant.n("Fc"): friction})
     measured = effect.with_noise(noise, seed=seed)
     data = measured.write(out / "data_friction_noisy.csv")
     clean.write(out / "data_clean.csv")
@@ -174,19 +219,19 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     # +- 0.61 N m; residual after white (before: p = 0 on every state); free-run NRMSE 6.36 -> 0.236 %; loop
     # discrepancy with the diagnosed model 0.34x (PID) and 0.043x (MPC) the linear model's; all four controllers
     # pass. (With the smoothing free, on the kernels where it slid to the FMU's 1 mrad/s: Fc 99.35, 0.018x, 0.030x.)
-    estimator = SINDYc().fit(measured, states=list(STATES), inputs=["Tm"])
+    estimator = SINDYc().fit(measured, states=list(states), inputs=[torque])
     model = estimator.model_
     model.save(out / "model.json")
     export_mat(model, out / "statespace.mat")
-    x0 = np.asarray(model.meta["x0"][0]) if "x0" in model.meta else measured[list(STATES)][0]
-    sim = model.simulate(x0, measured[["Tm"]][:-1], dt=STUDY_DT)
+    x0 = np.asarray(model.meta["x0"][0]) if "x0" in model.meta else measured[list(states)][0]
+    sim = model.simulate(x0, measured[[torque]][:-1], dt=STUDY_DT)
     fit_plot = out / "model_vs_data.png"
-    plot_trajectory(measured.select(list(STATES)), fit_plot, label="measured", errors=True,
+    plot_trajectory(measured.select(list(states)), fit_plot, label="measured", errors=True,
                     others=[("linear SINDYc model, free run", sim.to_trajectory(), COLOURS["before"])],
                     title="Identified linear model against the data it lacks friction for")
-    truth = effect[list(STATES)]
-    fit = {"fit_r2": dict(zip(STATES, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
-           "fit_nrmse_pct": dict(zip(STATES, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
+    truth = effect[list(states)]
+    fit = {"fit_r2": dict(zip(states, np.atleast_1d(r2(truth, sim.states)).round(6).tolist(), strict=True)),
+           "fit_nrmse_pct": dict(zip(states, np.atleast_1d(nrmse_fit_pct(truth, sim.states)).round(3).tolist(),
                                      strict=True))}
     # the names cosim identify, compare and diagnose use (fit_r2 and fit_nrmse_pct, a fit, are kept for old scripts)
     fit["fit"] = {"fit_pct": fit["fit_nrmse_pct"], "r2": fit["fit_r2"],
@@ -199,14 +244,14 @@ def _run_demo(out: Path, *, duration: float, friction: float, noise: float, seed
     diagnosis, diagnosis_summary = _diagnosis_stage(report, model, measured, effect, out, window=diagnosis_window,
                                                     progress=progress)
     _advance(bar, "control on the linear model")
-    linear = _control_stage(report, model, fmu, out, friction=friction)
+    linear = _control_stage(report, model, plant, out, friction=friction)
     _advance(bar, "control on the diagnosed model")
-    diagnosed = _diagnosed_control_stage(report, diagnosis.model_after, fmu, out, friction=friction)
+    diagnosed = _diagnosed_control_stage(report, diagnosis.model_after, plant, out, friction=friction)
     _comparison_section(report, linear, diagnosed)
     _advance(bar, "loop prediction")
-    discrepancy = _discrepancy_stage(report, linear, diagnosis.model_after, fmu, out, friction=friction)
+    discrepancy = _discrepancy_stage(report, linear, diagnosis.model_after, plant, out, friction=friction)
     _advance(bar, "report")
-    report.add_summary(**_summary(fmu, measured, diagnosis, diagnosis_summary, linear, diagnosed, discrepancy,
+    report.add_summary(**_summary(plant, measured, diagnosis, diagnosis_summary, linear, diagnosed, discrepancy,
                                   friction=friction, noise=noise, seed=seed, data=Path(data),
                                   seconds=time.perf_counter() - started))
     report_path = report.write(out / "report.html")
@@ -273,7 +318,7 @@ def summary_lines(result: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _summary(fmu: Path, measured: Trajectory, diagnosis: DiagnosisReport, diagnosis_summary: dict[str, Any],
+def _summary(plant: DemoPlant, measured: Trajectory, diagnosis: DiagnosisReport, diagnosis_summary: dict[str, Any],
              linear: dict[str, Any], diagnosed: dict[str, Any], discrepancy: dict[str, dict[str, float]], *,
              friction: float, noise: float, seed: int, data: Path, seconds: float) -> dict[str, Any]:
     """The report's summary box: the plant, the data, the friction found (± standard error, beside the truth),
@@ -294,8 +339,8 @@ def _summary(fmu: Path, measured: Trajectory, diagnosis: DiagnosisReport, diagno
             verdicts.append({**row, "scenarios": dict(zip(scenarios, row["scenarios"].values(), strict=True))})
     loop = "; ".join(f"{name.upper()} {d['linear_pct']:.3g} % with the linear model → {d['diagnosed_pct']:.3g} % "
                      "with the diagnosed one" for name, d in discrepancy.items())
-    return {"plant": f"{fmu_text(fmu)}: the bundled two-mass servo, with an undeclared Coulomb friction "
-                     f"Fc = {friction:g} N m switched on",
+    return {"plant": f"{fmu_text(plant.path)}: {plant.label}, with an undeclared Coulomb friction "
+                     f"{plant.n('Fc')} = {friction:g} N m switched on",
             "data": f"{data.name}: {len(measured)} samples, {float(measured.time[-1] - measured.time[0]):.4g} s at "
                     f"{step_text(measured.dt)}; 1-40 Hz multisine torque from rest; noise {noise * 100:g} % of each "
                     f"state's std (seed {seed}); the diagnosis searched the first "
@@ -348,7 +393,7 @@ def _diagnosis_stage(report: Report, model: IdentifiedModel, measured: Trajector
     return found, summary
 
 
-def _discrepancy_figure(runs: list[tuple[str, Any, Any]]) -> Any:
+def _discrepancy_figure(runs: list[tuple[str, Any, Any]], tracked: str = "theta_L") -> Any:
     """Per controller, the load angle of the FMU loop (thick, light) with each model's prediction (thin, dark)
     over it, and beside it each model's prediction error (FMU minus model)."""
     fig = new_figure(figsize=(13, 3.0 * len(runs) + 0.8), layout="constrained")
@@ -356,16 +401,16 @@ def _discrepancy_figure(runs: list[tuple[str, Any, Any]]) -> Any:
     models = (("linear model", "before", "-"), ("diagnosed model", "after", "--"))
     for (ax, err), (name, on_linear, on_diagnosed) in zip(axes, runs, strict=True):
         fmu_run = on_linear.fmu
-        ax.plot(fmu_run.time, fmu_run["r_theta_L"], color=COLOURS["reference"], ls=":", lw=0.9, label="reference")
-        ax.plot(fmu_run.time, fmu_run["theta_L"], color=COLOURS["fmu"], lw=6.0, alpha=0.22, solid_capstyle="butt",
+        ax.plot(fmu_run.time, fmu_run[f"r_{tracked}"], color=COLOURS["reference"], ls=":", lw=0.9, label="reference")
+        ax.plot(fmu_run.time, fmu_run[tracked], color=COLOURS["fmu"], lw=6.0, alpha=0.22, solid_capstyle="butt",
                 label="FMU (friction on)")
         for (label, key, style), run in zip(models, (on_linear, on_diagnosed), strict=True):
-            ax.plot(run.model.time, run.model["theta_L"], color=COLOURS[key], lw=1.1, ls=style, label=label)
+            ax.plot(run.model.time, run.model[tracked], color=COLOURS[key], lw=1.1, ls=style, label=label)
             k = min(len(run.model), len(fmu_run))
-            err.plot(fmu_run.time[:k], fmu_run["theta_L"][:k] - run.model["theta_L"][:k], color=COLOURS[key],
+            err.plot(fmu_run.time[:k], fmu_run[tracked][:k] - run.model[tracked][:k], color=COLOURS[key],
                      lw=1.1, ls=style, label=label)
         err.axhline(0.0, color=COLOURS["reference"], lw=0.5)
-        ax.set_ylabel("theta_L [rad]", fontsize=FONT_SIZE + 1)
+        ax.set_ylabel(f"{tracked} [rad]", fontsize=FONT_SIZE + 1)
         ax.set_title(f"{name.upper()} designed on the linear model: the loop and its predictions",
                      fontsize=FONT_SIZE + 1)
         err.set_ylabel("FMU − model [rad]", fontsize=FONT_SIZE + 1)
@@ -379,7 +424,7 @@ def _discrepancy_figure(runs: list[tuple[str, Any, Any]]) -> Any:
 
 
 # ---------------------------------------------------------------------------------------------- control
-def _designs(sys_c: Any) -> dict[str, Any]:
+def _designs(sys_c: Any, plant: DemoPlant) -> dict[str, Any]:
     """A PID (motor-speed feedback) and an MPC designed on the continuous StateSpace `sys_c`."""
     from controllers.base import DesignModel
     from controllers.mpc import MPC
@@ -391,9 +436,10 @@ def _designs(sys_c: Any) -> dict[str, Any]:
     # cannot tell from the rigid body's integrators) sit on either side of the tuner's "a thousand times slower
     # than the fastest" rule from one fit to the next: on one side no step is derived (Ti 0.12 s, the specs met),
     # on the other a 44 rad step is, and the design delivering it is too slow for them (Ti 1.7 s).
-    pid = tune_pid(sys_c, dt=STUDY_DT, input="Tm", tracked="theta_L", velocity="omega_m",
+    tm, theta_l = plant.n("Tm"), plant.n("theta_L")
+    pid = tune_pid(sys_c, dt=STUDY_DT, input=tm, tracked=theta_l, velocity=plant.n("omega_m"),
                    step=DEMO_SCENARIOS[0].amplitude, **_LIMITS)
-    mpc = MPC(sys_c, dt=STUDY_DT, horizon=20, inputs=["Tm"], outputs=["theta_m", "theta_L"], tracked=["theta_L"],
+    mpc = MPC(sys_c, dt=STUDY_DT, horizon=20, inputs=[tm], outputs=[plant.n("theta_m"), theta_l], tracked=[theta_l],
               **_LIMITS)
     for controller in (pid, mpc):
         if controller.design_model is None:
@@ -401,12 +447,12 @@ def _designs(sys_c: Any) -> dict[str, Any]:
     return {"pid": pid, "mpc": mpc}
 
 
-def _validated(report: Report, label: str, controller: Any, fmu: Path, out: Path, file_stem: str, *,
+def _validated(report: Report, label: str, controller: Any, plant: DemoPlant, out: Path, file_stem: str, *,
                friction: float, model: Any = "design") -> dict[str, Any]:
     """Save `controller`, validate it on the FMU with friction, add its table and plots; its summary."""
     controller.save(out / f"{file_stem}.json")
-    verdict = validate(fmu, controller, DEMO_SCENARIOS, TELESCOPE_SPECS, parameters={"Fc": friction}, model=model,
-                       progress=False)
+    verdict = validate(plant.path, controller, plant.scenarios(), TELESCOPE_SPECS,
+                       parameters={plant.n("Fc"): friction}, model=model, progress=False)
     pngs = [save_figure(plot_closed_loop(result, title=f"{label}: {s.name}"),
                         out / f"closed_loop_{file_stem}_{i}.png", close=False)
             for i, (s, result) in enumerate(zip(verdict.scenarios, verdict.results, strict=True), start=1)]
@@ -437,24 +483,24 @@ def _figures(verdict: Verdict) -> dict[str, Any]:
             "disturbance": {k: load[k] for k in ("settling_time", "steady_state_error", "iae", "peak_error")}}
 
 
-def _control_stage(report: Report, model: IdentifiedModel, fmu: Path, out: Path, *,
+def _control_stage(report: Report, model: IdentifiedModel, plant: DemoPlant, out: Path, *,
                    friction: float) -> dict[str, dict[str, Any]]:
     """A PID and an MPC designed on the linear `model`, validated on the FMU with friction."""
-    return {name: _validated(report, f"{name.upper()} designed on the linear model", controller, fmu, out,
+    return {name: _validated(report, f"{name.upper()} designed on the linear model", controller, plant, out,
                              name, friction=friction)
-            for name, controller in _designs(to_statespace(model)).items()}
+            for name, controller in _designs(to_statespace(model), plant).items()}
 
 
-def _diagnosed_control_stage(report: Report, diagnosed: IdentifiedModel, fmu: Path, out: Path, *,
+def _diagnosed_control_stage(report: Report, diagnosed: IdentifiedModel, plant: DemoPlant, out: Path, *,
                              friction: float) -> dict[str, dict[str, Any]]:
     """The designs on the linear part of `diagnosed`, with the compensation of its effects; validated."""
     from controllers.compensation import EffectCompensation, effect_terms
 
-    designs = _designs(to_statespace(diagnosed.linear_part()))
+    designs = _designs(to_statespace(diagnosed.linear_part()), plant)
     if not effect_terms(diagnosed)[0]:
         report.add_text("Controllers designed on the diagnosed model",
                         "The diagnosis added no effect: the designs are those on its refitted linear model.")
-        entries = {name: _validated(report, f"{name.upper()} designed on the diagnosed model", c, fmu, out,
+        entries = {name: _validated(report, f"{name.upper()} designed on the diagnosed model", c, plant, out,
                                     f"{name}_diagnosed", friction=friction) for name, c in designs.items()}
         for entry in entries.values():
             entry["summary"]["compensated"] = False
@@ -468,12 +514,12 @@ def _diagnosed_control_stage(report: Report, diagnosed: IdentifiedModel, fmu: Pa
     entries = {}
     for name, inner in designs.items():
         label = f"{name.upper()} + compensation, designed on the diagnosed model"
-        entry = _validated(report, label, EffectCompensation.from_model(inner, diagnosed), fmu, out,
+        entry = _validated(report, label, EffectCompensation.from_model(inner, diagnosed), plant, out,
                            f"{name}_diagnosed", friction=friction, model=diagnosed)
         entry["summary"]["compensated"] = True
         if _control_failures(entry["verdict"]):  # compensation hurt: keep the design without it, and say so
             plain = _validated(report, f"{name.upper()} designed on the diagnosed model, no compensation",
-                               inner, fmu, out, f"{name}_diagnosed_plain", friction=friction)
+                               inner, plant, out, f"{name}_diagnosed_plain", friction=friction)
             report.add_text(None, f"The compensated {name.upper()} failed the specs "
                             f"({'; '.join(_control_failures(entry['verdict']))}); the demo keeps the design on the "
                             "diagnosed model without compensation, which "
@@ -537,15 +583,17 @@ def _comparison_section(report: Report, linear: dict[str, Any], diagnosed: dict[
                              "the design.")
 
 
-def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: IdentifiedModel, fmu: Path, out: Path,
+def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: IdentifiedModel, plant: DemoPlant,
+                       out: Path,
                        *, friction: float) -> dict[str, dict[str, float]]:
     """How well the linear and the diagnosed model predict the FMU loop of the controllers on the linear model."""
     step = DEMO_SCENARIOS[0]
     summary, rows, runs = {}, [], []
     for name, entry in linear.items():
         on_linear = entry["verdict"].results[0]
-        on_diagnosed = closed_loop(entry["controller"], fmu, duration=step.duration, reference=step.reference,
-                                   parameters={"Fc": friction}, model=diagnosed_model, t_event=step.at, band=step.band,
+        on_diagnosed = closed_loop(entry["controller"], plant.path, duration=step.duration, reference=step.reference,
+                                   parameters={plant.n("Fc"): friction}, model=diagnosed_model, t_event=step.at,
+                                   band=step.band,
                                    progress=False)
         lin, dia = on_linear.metrics, on_diagnosed.metrics
         summary[name] = {"scenario": step.name, "linear_pct": float(lin["model_discrepancy_pct"]),
@@ -558,7 +606,7 @@ def _discrepancy_stage(report: Report, linear: dict[str, Any], diagnosed_model: 
                      "diagnosed model: RMS [rad]": float(f"{dia['model_discrepancy_rms']:.3g}"),
                      "diagnosed model: % of step": float(f"{dia['model_discrepancy_pct']:.3g}")})
         runs.append((name, on_linear, on_diagnosed))
-    png = save_figure(_discrepancy_figure(runs), out / "model_vs_fmu_loop.png", close=False)
+    png = save_figure(_discrepancy_figure(runs, plant.n("theta_L")), out / "model_vs_fmu_loop.png", close=False)
     report.add_table("Which model predicts the real loop: model-versus-FMU discrepancy", rows,
                      caption=f"{step.name}: the same controller against the FMU with friction and against each model "
                              "(RMS of the load-angle difference)")

@@ -63,3 +63,26 @@ def test_the_tour_runs_on_the_split_servo(tmp_path, cluster, monkeypatch):
     assert robust.startswith("PASSED") and f"run on {cluster}" in robust
     line = next(ln for ln in robust.splitlines() if ln.startswith("robustness:"))
     assert "pass rate 100.0%" in line and re.search(r"worst case load\.JL=[\d.e+]+$", line), line
+
+
+@pytest.mark.slow
+def test_the_demo_runs_on_the_split_servo(tmp_path):
+    """`cosim demo --plant split`: the main job on the servo as two FMUs. Its tested claims hold there too: the
+    motor's friction named on the motor's speed (within 5 %), the four controllers pass on the system with friction,
+    and the diagnosed model predicts each loop better than the linear one."""
+    from click.testing import CliRunner
+
+    from cosim.cli import main
+
+    result = CliRunner().invoke(main, ["demo", "--plant", "split", "--out-dir", str(tmp_path), "--json"],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.stderr[-2000:]
+    summary = json.loads(result.stdout)
+    friction = summary["diagnosis"]["effects"][0]
+    assert (friction["name"], friction["attached_to"]) == ("coulomb_friction", "motor.omega_m")
+    assert friction["parameters"]["Fc"] == pytest.approx(100.0, rel=0.05)
+    assert summary["fmu"].endswith("two_mass_servo_split.ssp")
+    for group in ("controllers", "controllers_diagnosed"):
+        assert all(c["passed"] for c in summary[group].values()), summary[group]
+    for name, d in summary["model_discrepancy"].items():
+        assert d["diagnosed_pct"] < d["linear_pct"], (name, d)
