@@ -49,6 +49,7 @@ def export_command(model_path: str, targets: tuple[str, ...], dt: str | None, co
     Example:
       cosim export model.json -o statespace.mat -o model.fmu
       cosim export pid.json -o pid.fmu    # the PID as an FMI 2.0 FMU, to place beside the plant in an SSP
+      cosim export mpc.json -o mpc.fmu    # the MPC: its step's generated C and its QP solver
     """
     from ..export import export
     from ..identify.model import IdentifiedModel
@@ -97,7 +98,8 @@ def _is_controller_file(path: str) -> bool:
 
 
 def _export_controller(path: str, targets: tuple[str, ...], as_json: bool) -> None:
-    """A PID controller file as an FMU (controllers.pid.fmu); other kinds and other formats refused in one line."""
+    """A PID or MPC controller file as an FMU (controllers.pid.fmu, controllers.mpc.fmu); other kinds and other formats
+    refused in one line."""
     from controllers.base import load_controller
 
     bad = [t for t in targets if Path(t).suffix.lower() != ".fmu"]
@@ -105,10 +107,12 @@ def _export_controller(path: str, targets: tuple[str, ...], as_json: bool) -> No
         raise InvalidSettingError(f"{path} is a controller; a controller exports as an FMU (-o NAME.fmu), not "
                                   f"{bad[0]}")
     controller = load_controller(path)
-    if controller.kind != "pid":
-        raise InvalidSettingError(f"{path} is a {controller.kind} controller; cosim exports a PID as an FMU (the MPC "
-                                  "from its generated C is not done yet)")
-    from controllers.pid.fmu import export_fmu
+    if controller.kind == "pid":
+        from controllers.pid.fmu import export_fmu
+    elif controller.kind == "mpc":
+        from controllers.mpc.fmu import export_fmu
+    else:
+        raise InvalidSettingError(f"{path} is a {controller.kind} controller; cosim exports a PID or an MPC as an FMU")
 
     written = []
     with staged_outputs(targets) as staged:
