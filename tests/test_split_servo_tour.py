@@ -59,10 +59,16 @@ def test_the_tour_runs_on_the_split_servo(tmp_path, cluster, monkeypatch):
                            "--spec", "settling_time<=1", "--spec", "overshoot<=10%", "--json"))
     assert mpc["passed"] is True
     robust = cosim("validate", "bundled-split", "pid.json", "--robustness", "8", "--spread", "0.2", "--vary",
-                   "load.JL", "--scheduler", cluster)
+                   "load.JL", "--effect", "motor.Fc=0:50", "--scheduler", cluster)
     assert robust.startswith("PASSED") and f"run on {cluster}" in robust
     line = next(ln for ln in robust.splitlines() if ln.startswith("robustness:"))
-    assert "pass rate 100.0%" in line and re.search(r"worst case load\.JL=[\d.e+]+$", line), line
+    assert "pass rate 100.0%" in line and re.search(r"worst case load\.JL=[\d.e+]+, motor\.Fc=[\d.e+]+$", line), line
+    # the system driven from a recorded file: its column motor.Tm is the input of that name
+    cosim("simulate", "bundled-split", "--input-file", "data.csv", "--set", "motor.Fc=0.3", "-o", "replay.csv")
+    import pandas as pd
+
+    replay, data = pd.read_csv(tmp_path / "replay.csv"), pd.read_csv(tmp_path / "data.csv")
+    assert (replay["motor.Tm"] == data["motor.Tm"]).all() and len(replay) == len(data)
 
 
 @pytest.mark.slow
