@@ -1,7 +1,7 @@
 """Issue 40: the test FMUs of an algebraic loop, checked on their own (the master that solves the loop is tested
 elsewhere; :func:`loop_fmus` builds the FMUs for those tests).
 
-Three Co-Simulation FMUs in C (tests/fmus/, FMI 2.0 and 3.0, built by `build_fmu(source=...)`), each with an output
+Three Co-Simulation FMUs in C (tests/fmus/loop/, FMI 2.0 and 3.0, built by `build_fmu(source=...)`), each with an output
 that depends directly on its input, so that wiring ``a.y -> b.u`` and ``b.y -> a.u`` closes an algebraic loop:
 
 * ``loop_a``: ``y = ka*u + x`` with the state ``der(x) = (u - x)/tau``, stepped exactly for a held input
@@ -29,7 +29,7 @@ from fmpy.validation import validate_fmu
 import cosim
 from cosim.plant.build import build_fmu
 
-SOURCES = Path(__file__).parent / "fmus"
+SOURCES = Path(__file__).parent / "fmus" / "loop"  # the three folders share its fmi2.c and fmi3.c
 NAMES = ("loop_a", "loop_b", "loop_b_nostate")
 KA, TAU, X0 = 0.5, 0.2, 1.0  # loop_a's defaults
 KB, C, W = -0.8, 0.3, 2.0  # loop_b's defaults
@@ -39,7 +39,7 @@ VR_TIME, VR_U, VR_Y, VR_X = 0, 1, 2, 3  # value references (VR_X: loop_a only)
 def loop_fmus(fmi_version: str = "2.0") -> dict[str, Path]:
     """The three loop test FMUs (``loop_a``, ``loop_b``, ``loop_b_nostate``) built for `fmi_version`, by name.
 
-    Built once from tests/fmus/<name> and cached on disk by :func:`cosim.plant.build.build_fmu`, later calls
+    Built once from tests/fmus/loop/<name> and cached on disk by :func:`cosim.plant.build.build_fmu`, later calls
     return the cached files. For tests of a master solving the loop: ``from test_loop_fmus import loop_fmus``.
     """
     return {name: build_fmu(source=SOURCES / name, fmi_version=fmi_version) for name in NAMES}

@@ -1,5 +1,5 @@
 """Algebraic loops between FMUs (issue 40): two test FMUs with direct feedthrough both ways
-(tests/fmus/loop_a, loop_b; tests/test_loop_fmus.py builds them), solved at each communication point where they can
+(tests/fmus/loop/loop_a, loop_b; tests/test_loop_fmus.py builds them), solved at each communication point where they can
 save and restore their state, refused in one line naming the loop's connectors where one cannot."""
 
 from __future__ import annotations

@@ -28,8 +28,10 @@ A source folder holds ``model*.c``/``*.h`` (the model), ``fmi2.c`` and ``fmi3.c`
 FMI wrappers), ``modelDescription.xml`` (FMI 2.0) and ``modelDescription3.xml``
 (FMI 3.0); the builder compiles the model with the wrapper of the requested version
 and stores that version's description as ``modelDescription.xml`` in the FMU. Only the
-folder itself is compiled and packed (its include path, its sources, its cache key): a
-folder does not share files with another.
+folder itself is compiled and packed (its include path, its sources, its cache key),
+with one exception: a folder without its own wrappers takes its parent folder's (they then
+count in its cache key and are packed with it), so that a family of FMUs written against
+one ``model.h`` interface shares one wrapper.
 
 A system of FMUs (``fmus/two_mass_servo_split``) is a folder holding an SSP 1.0
 ``SystemStructure.ssd`` and one FMU source folder per component, named after the
@@ -224,7 +226,7 @@ def build_fmu(
         name = src.name if name is None else name
         _check_name(name)
     description = src / _DESCRIPTIONS[version]
-    wrapper = src / _WRAPPERS[version]
+    wrapper = _wrapper(src, version)
     for needed in (description, wrapper):
         if not needed.is_file():
             raise BuildError(f"{name} has no FMI {version} source: {needed.name} is missing from {src}")
@@ -234,7 +236,7 @@ def build_fmu(
     version_line = compiler_version(compiler)
 
     c_files = [p for p in _c_sources(src) if p.name not in _WRAPPERS.values()] + [wrapper]
-    key = _cache_key(src, version, platform, compiler, version_line)
+    key = _cache_key(src, version, platform, compiler, version_line, wrapper)
     root = pathlib.Path(cache_dir).expanduser().absolute() if cache_dir is not None else fmu_cache_dir()
     target_dir = root / "fmus" / f"{name}-fmi{version}-{key}"
     target = target_dir / f"{name}.fmu"
@@ -430,6 +432,15 @@ def _ssd_component_sources(ssd: pathlib.Path) -> list[str]:
     return sources
 
 
+def _wrapper(src: pathlib.Path, version: int) -> pathlib.Path:
+    """The FMI `version` wrapper of a source folder: its own ``fmi2.c``/``fmi3.c``, else its parent folder's (a
+    family of FMUs written against one ``model.h`` interface shares one wrapper: the split servo's two FMUs, the
+    tests' loop FMUs)."""
+    own = src / _WRAPPERS[version]
+    shared = src.parent / _WRAPPERS[version]
+    return own if own.is_file() or not shared.is_file() else shared
+
+
 def _c_sources(src: pathlib.Path) -> list[pathlib.Path]:
     return sorted(p for p in src.iterdir() if p.is_file() and p.suffix == ".c")
 
@@ -473,7 +484,8 @@ def _model_identifier(description: pathlib.Path) -> str:
 
 
 def _cache_key(
-    src: pathlib.Path, version: int, platform: Platform, compiler: list[str], compiler_version: str
+    src: pathlib.Path, version: int, platform: Platform, compiler: list[str], compiler_version: str,
+    wrapper: pathlib.Path | None = None,
 ) -> str:
     digest = hashlib.sha256()
 
@@ -482,6 +494,8 @@ def _cache_key(
 
     for path in _source_files(src):
         add("source:" + path.name, path.read_bytes())
+    if wrapper is not None and wrapper.parent != src:  # a shared wrapper, from the parent folder
+        add("wrapper:" + wrapper.name, wrapper.read_bytes())
     for path in platform.header_files:
         add("header:" + path.name, path.read_bytes())
     add("fmi", str(version).encode())

@@ -1,5 +1,5 @@
 /*
- * loop_b (the same file in tests/fmus/loop_b_nostate): equations and checks. See model.h.
+ * loop_b (the same file in tests/fmus/loop/loop_b_nostate): equations and checks. See model.h.
  */
 #include "model.h"
 

@@ -1,6 +1,6 @@
 /*
- * FMI 2.0 Co-Simulation wrapper around a model core (model.h): the same file in motor/ and shaft_load/ of
- * fmus/two_mass_servo_split (tests/test_split_servo.py checks that the copies are identical); what differs
+ * FMI 2.0 Co-Simulation wrapper around a model core (model.h): one file for motor/ and shaft_load/ of
+ * fmus/two_mass_servo_split (the builder takes a folder's missing wrapper from its parent); what differs
  * between the two FMUs is in their model.h and model.c.
  *
  * Every function checks its arguments; a bad call returns fmi2Error and, when the instance has a logger, logs

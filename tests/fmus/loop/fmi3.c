@@ -1,6 +1,7 @@
 /*
- * FMI 3.0 Co-Simulation wrapper around a model core (model.h) of the loop test FMUs (issue 40). The same file
- * in tests/fmus/loop_a, loop_b and loop_b_nostate: what differs between them is in model.h.
+ * FMI 3.0 Co-Simulation wrapper around a model core (model.h) of the loop test FMUs (issue 40). One file
+ * for tests/fmus/loop/loop_a, loop_b and loop_b_nostate (the builder takes a folder's missing wrapper from its
+ * parent): what differs between them is in model.h.
  *
  * A bad call returns fmi3Error and logs one line. Only Float64 variables exist. With CAN_GET_AND_SET_FMU_STATE
  * the FMU state functions save and restore a copy of the whole model (time, state, inputs, parameters);
