@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 from importlib import resources
@@ -26,8 +25,7 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import InvalidSettingError
-from cosim.files import atomic_output
-from cosim.plant.toolchain import compile_library, find_compiler, platform_info, write_zip
+from cosim.plant.toolchain import compile_and_pack
 
 __all__ = ["export_fmu"]
 
@@ -142,21 +140,10 @@ def export_fmu(mpc: Any, path: str | os.PathLike, *, name: str | None = None) ->
     generated = generator.dump()
     digest = hashlib.sha256(generated.encode()).hexdigest()
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"cosim-mpc:{identifier}:{digest}")) + "}"
-    platform = platform_info(2)
     source = resources.files("controllers.mpc").joinpath("_fmu.c").read_text()
-    with tempfile.TemporaryDirectory(prefix="cosim-mpc-") as tmp:
-        folder = Path(tmp)
-        files = {"mpc_config.h": _config(mpc, identifier, guid, step_name), "fmi2.c": source,
-                 "step_generated.c": generated, "step.c": _WRAPPER}
-        for file_name, text in files.items():
-            (folder / file_name).write_text(text)
-        library = folder / (identifier + platform.extension)
-        include = _casadi_dir() / "include"
-        compile_library(find_compiler(), [folder / "fmi2.c", folder / "step.c", *libs], [folder, include],
-                        platform, library, what=f"the MPC FMU {identifier}")
-        members = [("modelDescription.xml", _model_description(mpc, identifier, guid), 0o644),
-                   (f"binaries/{platform.folder}/{library.name}", library.read_bytes(), 0o755)]
-        members += [(f"sources/{n}", t.encode(), 0o644) for n, t in files.items()]
-        with atomic_output(path) as out, open(out, "wb") as fh:
-            write_zip(fh, members)
+    files = {"mpc_config.h": _config(mpc, identifier, guid, step_name), "fmi2.c": source,
+             "step_generated.c": generated, "step.c": _WRAPPER}
+    compile_and_pack(path, identifier=identifier, description=_model_description(mpc, identifier, guid),
+                     sources=files, compiled=["fmi2.c", "step.c"], include_dirs=[_casadi_dir() / "include"],
+                     libraries=libs, what=f"the MPC FMU {identifier}")
     return path

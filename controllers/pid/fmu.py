@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 from importlib import resources
@@ -20,8 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.errors import InvalidSettingError
-from cosim.files import atomic_output
-from cosim.plant.toolchain import compile_library, find_compiler, platform_info, write_zip
+from cosim.plant.toolchain import compile_and_pack
 
 __all__ = ["export_fmu"]
 
@@ -128,19 +126,8 @@ def export_fmu(pid: Any, path: str | os.PathLike, *, name: str | None = None) ->
                                   "letters, digits and _")
     settings = pid.to_json() if hasattr(pid, "to_json") else repr(pid)
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"cosim-pid:{identifier}:{settings}")) + "}"
-    platform = platform_info(2)
     source = resources.files("controllers.pid").joinpath("_fmu.c").read_text()
-    with tempfile.TemporaryDirectory(prefix="cosim-pid-") as tmp:
-        folder = Path(tmp)
-        (folder / "pid_config.h").write_text(_config(pid, identifier, guid))
-        (folder / "fmi2.c").write_text(source)
-        library = folder / (identifier + platform.extension)
-        compile_library(find_compiler(), [folder / "fmi2.c"], [folder], platform, library,
-                        what=f"the PID FMU {identifier}")
-        members = [("modelDescription.xml", _model_description(pid, identifier, guid), 0o644),
-                   (f"binaries/{platform.folder}/{library.name}", library.read_bytes(), 0o755),
-                   ("sources/fmi2.c", source.encode(), 0o644),
-                   ("sources/pid_config.h", (folder / "pid_config.h").read_bytes(), 0o644)]
-        with atomic_output(path) as out, open(out, "wb") as fh:
-            write_zip(fh, members)
+    compile_and_pack(path, identifier=identifier, description=_model_description(pid, identifier, guid),
+                     sources={"fmi2.c": source, "pid_config.h": _config(pid, identifier, guid)}, compiled=["fmi2.c"],
+                     what=f"the PID FMU {identifier}")
     return path

@@ -13,7 +13,6 @@ from __future__ import annotations
 import ast
 import os
 import re
-import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -21,10 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidSettingError
-from ..files import atomic_output
 from ..identify.model import DIVERGENCE_LIMIT, IdentifiedModel
 from ..identify.terms import FUNCTIONS, Term
-from ..plant.toolchain import compile_library, find_compiler, platform_info, write_zip
+from ..plant.toolchain import compile_and_pack
 from .statespace import _check_dt
 
 __all__ = ["export_fmu"]
@@ -331,19 +329,7 @@ def export_fmu(model: IdentifiedModel, path: str | os.PathLike, *, dt: float | N
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "cosim-export:" + fingerprint)) + "}"
     header, source = _model_sources(model, identifier, guid, dt, int(nsub))
     description = _model_description(model, identifier, guid, dt, int(nsub))
-    platform = platform_info(2)
-    compiler = find_compiler()
-    with tempfile.TemporaryDirectory(prefix="cosim-export-") as tmp:
-        folder = Path(tmp)
-        sources = {"model.h": header, "model.c": source, "fmi2.c": wrapper}
-        for file_name, text in sources.items():
-            (folder / file_name).write_text(text, encoding="utf-8")
-        library = folder / (identifier + platform.extension)
-        compile_library(compiler, [folder / "model.c", folder / "fmi2.c"], [folder], platform, library,
-                        what=f"the exported model {identifier} (FMI 2)")
-        members = [("modelDescription.xml", description, 0o644),
-                   (f"binaries/{platform.folder}/{library.name}", library.read_bytes(), 0o755)]
-        members += [(f"sources/{file_name}", text.encode("utf-8"), 0o644) for file_name, text in sources.items()]
-        with atomic_output(path) as out, open(out, "wb") as fh:
-            write_zip(fh, members)
+    compile_and_pack(path, identifier=identifier, description=description,
+                     sources={"model.h": header, "model.c": source, "fmi2.c": wrapper}, compiled=["model.c", "fmi2.c"],
+                     what=f"the exported model {identifier} (FMI 2)")
     return path

@@ -24,6 +24,7 @@ __all__ = [
     "CFLAGS",
     "COMPILE_TIMEOUT_S",
     "Platform",
+    "compile_and_pack",
     "compile_library",
     "compiler_version",
     "find_compiler",
@@ -161,3 +162,30 @@ def write_zip_atomically(target: pathlib.Path, members: Sequence[Member], *, mod
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def compile_and_pack(path: str | os.PathLike, *, identifier: str, description: bytes, sources: dict[str, str],
+                     compiled: Sequence[str], include_dirs: Sequence[pathlib.Path] = (),
+                     libraries: Sequence[pathlib.Path] = (), what: str) -> pathlib.Path:
+    """An FMI 2.0 FMU from generated C: `sources` (file name -> text) written to a temporary folder, the `compiled`
+    ones built with the project's flags (and static `libraries`) into the binary, packed with `description` as
+    ``modelDescription.xml`` and the sources under ``sources/``, written atomically to `path`. What the exported
+    model FMU (:mod:`cosim.export.fmu`) and the controllers' FMUs (``controllers.pid.fmu``, ``controllers.mpc.fmu``)
+    share."""
+    from cosim.files import atomic_output
+
+    path = pathlib.Path(path)
+    platform = platform_info(2)
+    with tempfile.TemporaryDirectory(prefix="cosim-fmu-") as tmp:
+        folder = pathlib.Path(tmp)
+        for name, text in sources.items():
+            (folder / name).write_text(text, encoding="utf-8")
+        library = folder / (identifier + platform.extension)
+        compile_library(find_compiler(), [*(folder / name for name in compiled), *libraries],
+                        [folder, *include_dirs], platform, library, what=what)
+        members = [("modelDescription.xml", description, 0o644),
+                   (f"binaries/{platform.folder}/{library.name}", library.read_bytes(), 0o755)]
+        members += [(f"sources/{name}", text.encode("utf-8"), 0o644) for name, text in sources.items()]
+        with atomic_output(path) as out, open(out, "wb") as fh:
+            write_zip(fh, members)
+    return path
