@@ -47,19 +47,17 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ._demo_plant import DEMO_PLANTS, DEMO_SCENARIOS, DemoPlant, demo_plant
 from .data.plots import plot_trajectory
 from .data.simulation import simulate
 from .data.trajectory import Trajectory
 from .diagnose import DiagnosisReport, diagnose
-from .errors import InvalidSettingError
 from .export import export_mat, to_statespace
 from .figures import COLOURS, FONT_SIZE, new_figure, save_figure
 from .identify.metrics import nrmse_fit_pct, r2
@@ -68,16 +66,13 @@ from .identify.sindyc import SINDYc
 from .loop.closed_loop import closed_loop
 from .loop.plots import plot_closed_loop
 from .loop.response import jsonable_metrics
-from .loop.validation import TELESCOPE_SPECS, Verdict, disturbance_step, setpoint_step, validate
+from .loop.validation import TELESCOPE_SPECS, Verdict, validate
 from .loop.validation_report import fmu_text, verdict_summary
-from .plant.build import build_fmu, build_ssp
 from .report import Report, step_text
-from .study.paper import STATES, STUDY_DT
+from .study.paper import STUDY_DT
 
 #: The demo's identification experiment: a 1-40 Hz multisine at 20 % of the rated torque, from rest.
 DEMO_EXCITATION = "multisine:amp=1000,fmin=1,fmax=40"
-#: The demo's closed-loop scenarios: a 0.01 rad load-angle step, then a 500 N m load-torque step.
-DEMO_SCENARIOS = (setpoint_step(0.01, at=0.05, duration=2.0), disturbance_step(500.0, at=0.3, duration=2.0))
 #: Seconds of the data the diagnosis searches (from the start); None: the whole record.
 DIAGNOSIS_WINDOW = 2.0
 #: Input limits of every controller of the demo [N m] (the rated torque).
@@ -88,45 +83,6 @@ _STAGES = ("simulate", "identify", "diagnose", "control on the linear model", "c
 
 __all__ = ["DEMO_EXCITATION", "DEMO_PLANTS", "DEMO_SCENARIOS", "DIAGNOSIS_WINDOW", "DemoPlant", "demo_plant",
            "run_demo", "summary_lines"]
-
-#: The plants the demo runs on (``cosim demo --plant``).
-DEMO_PLANTS = ("bundled", "split")
-
-
-@dataclass(frozen=True)
-class DemoPlant:
-    """The plant of the demo: its file, what the report calls it, and its names of the one-FMU servo's signals and
-    parameters (``{"Tm": "motor.Tm", "Fc": "motor.Fc", ...}`` for the split servo; none for the bundled one)."""
-
-    path: Path
-    label: str
-    names: Mapping[str, str] = field(default_factory=dict)
-
-    def n(self, name: str) -> str:
-        """This plant's name of the one-FMU servo's `name`."""
-        return self.names.get(name, name)
-
-    @property
-    def states(self) -> tuple[str, ...]:
-        return tuple(self.n(s) for s in STATES)
-
-    def scenarios(self) -> tuple[Any, ...]:
-        """:data:`DEMO_SCENARIOS`, the load step on this plant's load-torque input."""
-        return (DEMO_SCENARIOS[0], disturbance_step(500.0, input=self.n("TL"), at=0.3, duration=2.0))
-
-
-def demo_plant(kind: str = "bundled") -> DemoPlant:
-    """The demo's plant: ``"bundled"``, the two-mass servo FMU; ``"split"``, the same servo as a motor FMU and a
-    shaft-and-load FMU wired by an SSP file (fmus/two_mass_servo_split), run by cosim's system master."""
-    if kind == "bundled":
-        return DemoPlant(build_fmu(), "the bundled two-mass servo")
-    if kind == "split":
-        names = {n: f"motor.{n}" for n in ("Tm", "theta_m", "omega_m", "Fc")}
-        names.update({n: f"load.{n}" for n in ("TL", "theta_L", "omega_L")})
-        return DemoPlant(build_ssp(), "the bundled servo split into a motor FMU and a shaft-and-load FMU (an SSP "
-                         "system run by cosim's master)", names)
-    raise InvalidSettingError(f"plant {kind!r}; choose {' or '.join(DEMO_PLANTS)}")
-
 
 def run_demo(out_dir: str | os.PathLike, *, duration: float = 4.0, friction: float = 100.0,
              noise: float = 0.05, seed: int = 0, diagnosis_window: float | None = DIAGNOSIS_WINDOW,

@@ -78,3 +78,21 @@ def test_a_loop_through_an_fmu_that_cannot_save_its_state_is_refused_in_one_line
     info = subprocess.run([*run, "fmu", "info", "SystemStructure.ssd", "--json"], capture_output=True, text=True,
                           cwd=tmp_path, timeout=120)
     assert json.loads(info.stdout)["loops"] == [["a.y", "b.u", "b.y", "a.u"]]
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_connected_fmus_initialise_together(version):
+    """FMI's consistent initialisation: loop_a with ``steady=1`` starts its state at its input's value as it stands
+    when it leaves Initialization Mode. Its input is loop_b's output, which the master gives it there: the state
+    starts at b's initial output (kb*2 + c*sin(0), b's free input started at 2), not at the input's start value 0
+    (where the connected values were set only after the FMUs had left Initialization Mode, it did)."""
+    fmus = loop_fmus(version)
+    system = System({"a": fmus["loop_a"], "b": fmus["loop_b"]}, [("b.y", "a.u")])
+    with SystemPlant(system, dt=0.01, outputs=["a.x", "b.y"], parameters={"a.steady": 1.0, "b.c": 0.3},
+                     start={"b.u": 2.0}) as plant:
+        x0, yb0 = plant.get(["a.x", "b.y"])
+        assert yb0 == pytest.approx(KB * 2.0) and x0 == pytest.approx(yb0)  # b.y(0) = kb*2 + c*sin(0)
+        plant.reset()
+        assert plant.get(["a.x"])[0] == pytest.approx(KB * 2.0)  # again after a reset
+    with SystemPlant(system, dt=0.01, outputs=["a.x"], parameters={"a.steady": 0.0}) as plant:
+        assert plant.get(["a.x"])[0] == 1.0  # its start value x0, without steady

@@ -164,7 +164,7 @@ def _driven(fmu_path: Any, signals: list[Any], inputs: tuple[str, ...], input_fi
             ) -> tuple[list[str], list[str]]:
     """The FMU's numeric inputs a run given `inputs` (NAME or NAME=SPEC) and `input_file` drives, and the others."""
     from ..errors import UnknownVariableError
-    from ..plant.model_description import _close_matches
+    from ..plant._fmu_description import _close_matches
 
     names = [s.name for s in signals]
     given = [item.partition("=")[0].strip() for item in inputs]

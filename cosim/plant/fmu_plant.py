@@ -53,9 +53,10 @@ from ..errors import (
 )
 from ._fmi_callbacks import fmi2_callbacks
 from ._fmi_calls import REAL_TYPES, coerce, read_value, status_name, write_value
+from ._fmu_description import _close_matches
 from ._stepping import _input_value, _Stepping
 from ._variables import NUMERIC, Signal, array_value, expand_signals, unknown_element
-from .model_description import _close_matches, interface_kind, open_model_description, parameter_names
+from .model_description import interface_kind, open_model_description, parameter_names
 from .model_exchange import ModelExchangeSlave
 
 __all__ = ["FmuPlant"]
@@ -104,6 +105,8 @@ class FmuPlant(_Stepping):
         Model Exchange only: FMPy's CVode, or forward Euler at the DefaultExperiment stepSize (else `dt`).
     relative_tolerance : float, optional
         Model Exchange with CVode: its relative tolerance (default: the DefaultExperiment's, else 1e-5).
+    initialize : bool
+        False leaves the FMU in Initialization Mode (a master's consistent start): :meth:`exit_initialization`.
 
     Notes
     -----
@@ -138,6 +141,7 @@ class FmuPlant(_Stepping):
         kind: str | None = None,
         solver: str = "cvode",
         relative_tolerance: float | None = None,
+        initialize: bool = True,
     ) -> None:
         self.path = Path(fmu).absolute()  # FMPy changes the process's directory while it loads a library (below)
         self._fmu = None
@@ -190,7 +194,7 @@ class FmuPlant(_Stepping):
         self._stage(start or {}, only_parameters=False)
         try:
             self._load(instance_name)
-            self._initialize()
+            self._initialize(finish=initialize)
         except BaseException:
             self.close()
             raise
@@ -370,21 +374,32 @@ class FmuPlant(_Stepping):
         raise FmiCallError(f"{self.path.name}: {function} returned {status_name(status)}{when}{advice}",
                            function=function, status=status, time=at)
 
-    def _initialize(self) -> None:
+    def _initialize(self, finish: bool = True) -> None:  # finish: leave Initialization Mode too
         fmu = self._fmu
         self._apply_settings()
         try:
             if self.fmi_version == "2.0":
                 fmu.setupExperiment(startTime=self.t0)
                 fmu.enterInitializationMode()
-                fmu.exitInitializationMode()
             else:
                 fmu.enterInitializationMode(startTime=self.t0)
-                fmu.exitInitializationMode()
         except Exception as exc:
             self._fmu_error("initialization", exc)
         self._initialized = True
+        self._in_initialization = True
         self._counter[0] = 0
+        if finish:
+            self.exit_initialization()
+
+    def exit_initialization(self) -> None:
+        """Leave Initialization Mode (after ``initialize=False``); nothing to do when the plant steps already."""
+        if not getattr(self, "_in_initialization", False):
+            return
+        try:
+            self._fmu.exitInitializationMode()
+        except Exception as exc:
+            self._fmu_error("initialization", exc)
+        self._in_initialization = False
 
     def _apply_settings(self) -> None:
         for name, value in self._settings.items():
@@ -462,13 +477,16 @@ class FmuPlant(_Stepping):
             if var.variability == "tunable":
                 self._set_one(var, self._settings[var.name])
 
-    def reset(self, *, parameters: Mapping[str, Any] | None = None, start: Mapping[str, Any] | None = None) -> None:
+    def reset(self, *, parameters: Mapping[str, Any] | None = None, start: Mapping[str, Any] | None = None,
+              initialize: bool = True) -> None:
         """Back to ``t0`` and the start values; applies the parameters and start values given so far.
 
         Parameters
         ----------
         parameters, start : mapping, optional
             More values to apply, kept for later resets too.
+        initialize : bool
+            False leaves the FMU in Initialization Mode (see the class's `initialize`).
         """
         self._stage(parameters or {}, only_parameters=True)
         self._stage(start or {}, only_parameters=False)
@@ -478,7 +496,7 @@ class FmuPlant(_Stepping):
         except Exception as exc:
             self._fmu_error("reset", exc)
         self._initialized = False
-        self._initialize()
+        self._initialize(finish=initialize)
         self._ended_at = None
         self._bind_hot_path()  # anew: the staged values of array inputs, and a step after the FMU ended
 

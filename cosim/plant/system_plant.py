@@ -194,7 +194,7 @@ class SystemPlant:
             s_vals = {**{k: v for k, v in given.items() if kinds.get(k) != "parameter"}, **starts[n]}
             self._plants[n] = FmuPlant(comp.source, dt=self._dt * self.multiples[n], parameters=p_vals,
                                        start=s_vals, t0=self._t0, inputs=ins, outputs=wanted_out[n],
-                                       instance_name=n, kind=w.kinds[n], solver=self._solver)
+                                       instance_name=n, kind=w.kinds[n], solver=self._solver, initialize=False)
             self._ins[n] = ins
             deps = {o.variable.name: o.dependencies for o in md.outputs}
             self._feedthrough[n] = any(deps.get(o, None) is None or any(d.causality == "input" for d in deps[o])
@@ -229,6 +229,7 @@ class SystemPlant:
         for block in _algebraic_loops.blocks(self):
             for n in block.components:
                 self._blocks[n] = block
+        self._initialize_together()
         self._start_history()
         self.engine_note = None if self._engine_asked != "python" else "engine='python' asked"
         if self._engine_asked != "python":
@@ -249,6 +250,23 @@ class SystemPlant:
     def engine(self) -> str:
         """``"c"`` or ``"python"``: who runs the steps."""
         return "c" if self._c is not None else "python"
+
+    def _initialize_together(self) -> None:
+        """FMI's consistent initialisation of connected FMUs: every component is in Initialization Mode; in the
+        wiring's order each is given its inputs (the connected outputs' initial values, the free inputs' start
+        values) and its outputs read, twice, so that a value that depends on another component's input arrives;
+        then all leave Initialization Mode. An FMU that computes initial values from its inputs (a state started
+        in steady state) sees its neighbours' there. (Algebraic loops are solved after, at the start time.)"""
+        u_free = np.array([self._free_start(n) for n in self.inputs], dtype=float)
+        self._y = {n: p.read_outputs() for n, p in self._plants.items()}
+        for _ in range(2):
+            for n in self.wiring.order:
+                if self._ins[n]:
+                    plant = self._plants[n]
+                    plant.set_inputs(self._input_values(n, u_free, 0.0, 0.0, at_end=True))
+                    self._y[n][:] = plant.read_outputs()
+        for plant in self._plants.values():
+            plant.exit_initialization()
 
     def _start_history(self) -> None:
         """Time and output history of each component (its last three communication points), made consistent."""
@@ -410,7 +428,8 @@ class SystemPlant:
         params = self._per_component(parameters or {}, "parameter")
         starts = self._per_component(start or {}, "start value")
         for n, plant in self._plants.items():
-            plant.reset(parameters=params[n], start=starts[n])
+            plant.reset(parameters=params[n], start=starts[n], initialize=False)
+        self._initialize_together()
         self._start_history()
         self._bind_engine()
 

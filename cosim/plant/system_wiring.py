@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import CosimError, InvalidSettingError, UnknownVariableError
+from ._fmu_description import _close_matches, interface_kind, open_model_description, variable_unit
 from ._variables import NUMERIC, expand_signals
-from .model_description import _close_matches, interface_kind, open_model_description, variable_unit
 from .system_structure import Connection, System, split_name
 
 __all__ = ["Link", "Wiring", "wire"]

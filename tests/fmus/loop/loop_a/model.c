@@ -18,6 +18,7 @@ static ModelStatus fail(Model *m, const char *fmt, ...) {
 void model_reset(Model *m) {
     m->ka = 0.5;
     m->tau = 0.2; /* s */
+    m->steady = 0.0;
     m->u = 0.0;
     m->x = 1.0; /* x0 */
     m->time = 0.0;
@@ -34,6 +35,7 @@ ModelStatus model_get_real(Model *m, unsigned vr, double *value) {
     case VR_DER_X: *value = (m->u - m->x) / m->tau; return MODEL_OK;
     case VR_KA: *value = m->ka; return MODEL_OK;
     case VR_TAU: *value = m->tau; return MODEL_OK;
+    case VR_STEADY: *value = m->steady; return MODEL_OK;
     default: return fail(m, "no Real variable has value reference %u", vr);
     }
 }
@@ -49,9 +51,11 @@ ModelStatus model_set_real(Model *m, unsigned vr, double value) {
         return MODEL_OK;
     case VR_KA:
     case VR_TAU:
+    case VR_STEADY:
         if (!before_init) return fail(m, "the parameters are fixed: set them before initialization");
         if (vr == VR_KA) m->ka = value;
-        else m->tau = value;
+        else if (vr == VR_TAU) m->tau = value;
+        else m->steady = value;
         return MODEL_OK;
     default: return fail(m, "value reference %u cannot be set", vr);
     }
@@ -67,6 +71,7 @@ ModelStatus model_enter_initialization(Model *m, double start_time) {
 ModelStatus model_exit_initialization(Model *m) {
     if (m->phase != PHASE_INITIALIZATION) return fail(m, "not in Initialization Mode");
     if (!(m->tau > 0.0)) return fail(m, "need tau > 0, got %g", m->tau);
+    if (m->steady != 0.0) m->x = m->u; /* x in steady state with the input set during initialization */
     m->phase = PHASE_STEPPING;
     return MODEL_OK;
 }

@@ -33,7 +33,8 @@ enum {
     VR_DER_X = 4, /* (u - x)/tau */
     VR_KA = 5,
     VR_TAU = 6,
-    VR_COUNT = 7
+    VR_STEADY = 7, /* parameter: 1 starts x at its input's value at the end of initialization (steady state) */
+    VR_COUNT = 8
 };
 
 typedef enum {
@@ -47,7 +48,7 @@ typedef enum { MODEL_OK = 0, MODEL_ERROR = 1 } ModelStatus;
 
 /* Plain data, no pointers: an FMU state is a copy of it. */
 typedef struct {
-    double ka, tau; /* parameters */
+    double ka, tau, steady; /* parameters */
     double u;       /* input */
     double x;       /* state */
     double time;
