@@ -108,7 +108,7 @@ def test_the_demo_shows_its_stages_on_a_terminal_only(monkeypatch, tmp_path):
 
     terminal = fake_terminal(monkeypatch)
 
-    def stages(out, *, progress, bar, **options):  # the demo's stages, without their work (25 s)
+    def stages(out, plant, *, progress, bar, **options):  # the demo's stages, without their work (25 s)
         for stage in demo._STAGES[1:]:
             demo._advance(bar, stage)
         bar.update()
