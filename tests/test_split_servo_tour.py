@@ -43,7 +43,7 @@ def test_the_tour_runs_on_the_split_servo(tmp_path, cluster, monkeypatch):
     cosim("identify", "data.csv", "--state", STATES, "--input", "motor.Tm", "-o", "model.json")
     assert json.loads((tmp_path / "model.json").read_text())["meta"]["stable"] is True
     # a Coulomb friction of 100 N m switched on in the motor FMU: named on the motor's speed, within 10 %
-    cosim("simulate", "bundled-split", "--input", "motor.Tm=square:amp=500,freq=2", "--duration", "4", "--dt",
+    cosim("simulate", "bundled-split", "--input", "motor.Tm=square:amp=500,freq=2", "--duration", "2", "--dt",
           "1/2257", "--set", "motor.Fc=100", "--noise", "0.1", "--seed", "0", "-o", "friction.csv")
     diagnosis = json.loads(cosim("diagnose", "friction.csv", "--state", STATES, "--input", "motor.Tm", "--json"))
     first = diagnosis["effects"][0]
@@ -58,7 +58,7 @@ def test_the_tour_runs_on_the_split_servo(tmp_path, cluster, monkeypatch):
                            "--scenario", "disturbance:amp=500,at=0.5,input=load.TL", "--set", "motor.Fc=100",
                            "--spec", "settling_time<=1", "--spec", "overshoot<=10%", "--json"))
     assert mpc["passed"] is True
-    robust = cosim("validate", "bundled-split", "pid.json", "--robustness", "8", "--spread", "0.2", "--vary",
+    robust = cosim("validate", "bundled-split", "pid.json", "--robustness", "4", "--spread", "0.2", "--vary",
                    "load.JL", "--effect", "motor.Fc=0:50", "--scheduler", cluster)
     assert robust.startswith("PASSED") and f"run on {cluster}" in robust
     line = next(ln for ln in robust.splitlines() if ln.startswith("robustness:"))
