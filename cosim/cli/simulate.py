@@ -52,13 +52,17 @@ __all__ = ["data", "simulate"]
                    "Default: cs when the FMU has it, else me.")
 @click.option("--solver", type=click.Choice(["cvode", "euler"]), default="cvode", show_default=True,
               help="Solver of a Model Exchange FMU.")
+@click.option("--master", type=click.Choice(["gauss-seidel", "jacobi"]), default=None,
+              help="A system's co-simulation algorithm (default gauss-seidel; see docs/systems.md).")
+@click.option("--extrapolation", type=click.IntRange(0, 2), default=None,
+              help="A system's input extrapolation order: 0 (first-order coupling), 1 (default) or 2.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: long runs on a terminal).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
 @_friendly
 def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: str, time_column: str | None,
              duration: str | None, dt: str | None, sets: tuple[str, ...], starts: tuple[str, ...], noise: str,
-             seed: int, out: str | None, record: str | None, kind: str | None, solver: str, progress: bool | None,
-             as_json: bool) -> None:
+             seed: int, out: str | None, record: str | None, kind: str | None, solver: str, master: str | None,
+             extrapolation: int | None, progress: bool | None, as_json: bool) -> None:
     """Simulate an FMU at a fixed step with zero-order-hold inputs and write the trajectory.
 
     PATH is an .fmu file, `bundled` for the bundled servo, or a system of FMUs (an .ssp, a SystemStructure.ssd,
@@ -70,6 +74,7 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
           --set Fc=0.3 --noise 0.1 --seed 0 -o data.csv
       cosim simulate bundled --input-file data.csv --set Fc=0.3 -o again.csv
       cosim simulate bundled --input-file rig.mat --input "Tm=data[:,1]" -o run.mat
+      cosim simulate bundled-split --input motor.Tm=step:amp=100 --duration 1 --dt 1/2257 --master jacobi -o s.csv
     """
     from ..data.simulation import simulate as run
 
@@ -93,7 +98,8 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
         raise InvalidSettingError("give --dt and --duration (or --input-file, whose step and length they take)")
     traj = run(fmu_path, signals, duration=parse_number(duration, what="--duration"),
                dt=parse_number(dt, what="--dt"), parameters=parameters, start=start, progress=progress, t0=t0,
-               kind=kind, solver=solver,
+               kind=kind, solver=solver, master={k: v for k, v in (("algorithm", master),
+                                                                  ("extrapolation", extrapolation)) if v is not None},
                outputs=None if record is None else "all" if record.strip() == "all" else _names(record, "--record"))
     if level:
         traj = traj.with_noise(level, seed=seed)
@@ -102,10 +108,11 @@ def simulate(path: str, inputs: tuple[str, ...], input_file: str | None, hold: s
     final = {name: float(traj[name][-1]) for name in traj.names}
     status = traj.meta.get("status", "completed")
     left = traj.meta.get("left_inputs", {})
-    summary = {"status": status, "kind": traj.meta["kind"], "path": str(Path(out).resolve()) if out else None,
-               "fmu": str(fmu_path), "driven": list(traj.inputs), "left": list(left),
-               "samples": len(traj),
-               "dt": traj.meta["dt"], "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
+    master_used = {"master": traj.meta["master"]} if "master" in traj.meta else {}
+    summary = {"status": status, "kind": traj.meta["kind"], **master_used,
+               "path": str(Path(out).resolve()) if out else None, "fmu": str(fmu_path),
+               "driven": list(traj.inputs), "left": list(left), "samples": len(traj), "dt": traj.meta["dt"],
+               "duration": float(traj.time[-1] - traj.time[0]), "signals": list(traj.names),
                "noise": level, "seed": seed, "final": final}
     ended = ""
     if status == "terminated":

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -102,13 +103,17 @@ def sample_input(name: str, spec: InputSpec, t: np.ndarray, *, maximum: float | 
 
 
 def open_plant(path: str | os.PathLike, *, kind: str | None = None, solver: str = "cvode",
-               t0: float | None = None, **options: Any) -> FmuPlant | SystemPlant:
+               t0: float | None = None, master: Mapping[str, Any] | None = None,
+               **options: Any) -> FmuPlant | SystemPlant:
     """An FMU as :class:`~cosim.plant.fmu_plant.FmuPlant`, or a system of FMUs (``.ssp``, ``.ssd``, an OSP
-    ``...SystemStructure.xml``) as :class:`~cosim.plant.system_plant.SystemPlant`, with the same options."""
+    ``...SystemStructure.xml``) as :class:`~cosim.plant.system_plant.SystemPlant`, with the same options; `master`:
+    the system master's (``algorithm``, ``extrapolation``, ``step_multiples``...), refused for one FMU."""
     if is_system_file(path):
         if kind not in (None, "cs"):
             raise InvalidSettingError(f"kind={kind!r} is for one FMU; a system's components say their own interface")
-        return SystemPlant(path, solver=solver, t0=0.0 if t0 is None else t0, **options)
+        return SystemPlant(path, solver=solver, t0=0.0 if t0 is None else t0, **(master or {}), **options)
+    if master:
+        raise InvalidSettingError(f"{', '.join(master)}: options of a system's master; {Path(path).name} is one FMU")
     return FmuPlant(path, kind=kind, solver=solver, t0=t0, **options)
 
 
@@ -173,6 +178,7 @@ def simulate(
     progress: bool | None = None,
     kind: str | None = None,
     solver: str = "cvode",
+    master: Mapping[str, Any] | None = None,
 ) -> Trajectory:
     """Simulate a co-simulation FMU at a fixed step and return its trajectory.
 
@@ -200,6 +206,9 @@ def simulate(
         when the FMU has it, else Model Exchange).
     solver : {"cvode", "euler"}
         The solver of a Model Exchange FMU (FMPy's CVode, or forward Euler at the FMU's default step).
+    master : mapping, optional
+        A system's master options (:class:`~cosim.plant.system_plant.SystemPlant`: ``algorithm``,
+        ``extrapolation``, ``step_multiples``, ``hold_discrete``, ``engine``).
     progress : bool or None, default None
         Progress bar on stderr. None shows it for long runs (200,000 steps or more) and only when stderr is
         a terminal; True shows it anyway, False hides it.
@@ -230,7 +239,7 @@ def simulate(
     check_memory(2.0 * (n + 1) * (1 + len(inputs) + named + 1), what=f"a simulation of {n + 1:,} "
                  f"samples ({duration:g} s at dt={dt:g} s)", hint="use a larger dt or a shorter duration")
     with open_plant(fmu, dt=dt, parameters=parameters, start=start, t0=t0, inputs=list(inputs), outputs=outputs,
-                    kind=kind, solver=solver) as plant:
+                    kind=kind, solver=solver, master=master) as plant:
         check_memory(2.0 * (n + 1) * (1 + len(plant.inputs) + len(plant.outputs)),
                      what=f"a simulation of {n + 1:,} samples of {len(plant.inputs) + len(plant.outputs)} signals",
                      hint="use a larger dt, a shorter duration or fewer outputs")
@@ -277,6 +286,8 @@ def simulate(
             "model": plant.model_description.modelName,
             "fmi_version": plant.fmi_version,
             "kind": plant.kind,
+            **({"master": {"algorithm": plant.algorithm, "extrapolation": plant.extrapolation,
+                           "engine": plant.engine}} if plant.kind == "system" else {}),
             **({"solver": plant.solver} if plant.kind == "me" else {}),
             "dt": dt,
             "t0": t0,
