@@ -168,24 +168,39 @@ class SystemPlant:
         return out
 
     def _open(self) -> None:
+        """Open every component (in Initialization Mode), route its inputs, start the master together."""
+        comps, w = self.system.components, self.wiring
+        links_into: dict[str, list] = {n: [lk for lk in w.links if lk.end[0] == n] for n in comps}
+        wanted_out: dict[str, list[str]] = {n: [] for n in comps}  # what each component must read: linked, recorded
+        for comp, var in [lk.start for lk in w.links] + [split_name(name, comps) for name in self.outputs]:
+            if var not in wanted_out[comp]:
+                wanted_out[comp].append(var)
+        self._open_components(links_into, wanted_out)
+        self._route(links_into, wanted_out)
+        self._order = w.order if self.algorithm == "gauss-seidel" else tuple(comps)
+        self._blocks = {n: block for block in _algebraic_loops.blocks(self) for n in block.components}
+        self._initialize_together()
+        self._start_history()
+        self.engine_note = None if self._engine_asked != "python" else "engine='python' asked"
+        if self._engine_asked != "python":
+            from ._system_engine import why_not
+
+            self.engine_note = why_not(self)
+            if self.engine_note and self._engine_asked == "c":
+                raise InvalidSettingError(f"engine='c' cannot run this system: {self.engine_note}; use "
+                                          "engine='auto' or 'python'")
+        self._bind_engine()
+
+    def _open_components(self, links_into: Mapping[str, list], wanted_out: Mapping[str, list[str]]) -> None:
+        """A FmuPlant per component, left in Initialization Mode: driven at its linked and free inputs, reading what
+        is linked from it or recorded; the system file's values and the caller's, parameters apart from starts."""
         comps, w = self.system.components, self.wiring
         params = self._per_component(self._settings["parameters"], "parameter")
         starts = self._per_component(self._settings["start"], "start value")
-        links_into: dict[str, list] = {n: [] for n in comps}
-        for lk in w.links:
-            links_into[lk.end[0]].append(lk)
-        wanted_out: dict[str, list[str]] = {n: [] for n in comps}
-        for lk in w.links:
-            if lk.start[1] not in wanted_out[lk.start[0]]:
-                wanted_out[lk.start[0]].append(lk.start[1])
-        for name in self.outputs:
-            comp, var = split_name(name, comps)
-            if var not in wanted_out[comp]:
-                wanted_out[comp].append(var)
         free = {split_name(n, comps) for n in self.inputs}
         self._plants, self._ins, self._feedthrough = {}, {}, {}
         for n, comp in comps.items():
-            ins = [lk.end[1] for lk in links_into[n]] + [v for c, v in sorted(free) if c == n]
+            ins = {lk.end[1] for lk in links_into[n]} | {v for c, v in free if c == n}
             ins = [v for v in w.component_inputs[n] if v in ins]  # modelDescription order
             md = w.descriptions[n]
             kinds = {v.name: v.causality for v in md.modelVariables}
@@ -199,8 +214,12 @@ class SystemPlant:
             deps = {o.variable.name: o.dependencies for o in md.outputs}
             self._feedthrough[n] = any(deps.get(o, None) is None or any(d.causality == "input" for d in deps[o])
                                        for o in wanted_out[n] if o in deps) and bool(ins)
-        # where each component input takes its value from: a link (source component, output index, factor,
-        # offset) or a free input (its position in step()'s u)
+
+    def _route(self, links_into: Mapping[str, list], wanted_out: Mapping[str, list[str]]) -> None:
+        """Where each component input takes its value from (`_sources`: a link ``("link", source component,
+        output position, factor, offset, held)`` or a free input ``("free", its position in step()'s u)``), which
+        components answer a free input at once (`_pre`), and where the recorded outputs are read (`_picks`)."""
+        comps = self.system.components
         self._sources: dict[str, list[tuple]] = {}
         for n in comps:
             src = []
@@ -214,32 +233,13 @@ class SystemPlant:
                 else:
                     src.append(("free", self.inputs.index(f"{n}.{v}")))
             self._sources[n] = src
-        # components with an output that answers a free input at once: given step()'s inputs before the step
         self._pre = {}
         for n in comps:
             free = {v for v, src in zip(self._ins[n], self._sources[n], strict=True) if src[0] == "free"}
-            deps = [o.dependencies for o in w.descriptions[n].outputs if o.variable.name in wanted_out[n]]
+            deps = [o.dependencies for o in self.wiring.descriptions[n].outputs if o.variable.name in wanted_out[n]]
             self._pre[n] = bool(free) and any(d is None or any(x.name in free for x in d) for d in deps)
-        self._picks = []
-        for name in self.outputs:
-            comp, var = split_name(name, comps)
-            self._picks.append((comp, self._plants[comp].outputs.index(var)))
-        self._order = w.order if self.algorithm == "gauss-seidel" else tuple(comps)
-        self._blocks = {}
-        for block in _algebraic_loops.blocks(self):
-            for n in block.components:
-                self._blocks[n] = block
-        self._initialize_together()
-        self._start_history()
-        self.engine_note = None if self._engine_asked != "python" else "engine='python' asked"
-        if self._engine_asked != "python":
-            from ._system_engine import why_not
-
-            self.engine_note = why_not(self)
-            if self.engine_note and self._engine_asked == "c":
-                raise InvalidSettingError(f"engine='c' cannot run this system: {self.engine_note}; use "
-                                          "engine='auto' or 'python'")
-        self._bind_engine()
+        self._picks = [(comp, self._plants[comp].outputs.index(var))
+                       for comp, var in (split_name(name, comps) for name in self.outputs)]
 
     def _bind_engine(self) -> None:
         from ._system_engine import CEngine
