@@ -32,24 +32,30 @@ STUDY_DT = 1 / 2257
 DURATION = 1.0
 STATES = ("theta_m", "omega_m", "theta_L", "omega_L")
 SYSTEM_NAMES = ("motor.theta_m", "motor.omega_m", "load.theta_L", "load.omega_L")
-EFFECTS = {"linear": {}, "friction, cogging, gravity": {"Fc": 20.0, "Tcog": 5.0, "ncog": 12.0, "mgl": 200.0}}
+#: label -> (effects switched on, the torque): a step and a 2 Hz sine; and a random staircase (a new level every
+#: 22 ms, +-800 N m), whose steps ring the shaft's resonance at every one of them
+CASES = {"linear": ({}, "sine"),
+         "friction, cogging, gravity": ({"Fc": 20.0, "Tcog": 5.0, "ncog": 12.0, "mgl": 200.0}, "sine"),
+         "linear, a random torque staircase": ({}, "staircase")}
 WHERE = {"Fc": "motor", "Tcog": "motor", "ncog": "motor", "mgl": "load"}
 
 
-def torque(t: np.ndarray) -> np.ndarray:
+def torque(t: np.ndarray, kind: str = "sine") -> np.ndarray:
+    if kind == "staircase":
+        return np.random.default_rng(0).uniform(-800.0, 800.0, 60)[(t / (50 / 2257)).astype(int)]
     return 200.0 * np.sin(2 * np.pi * 2.0 * t) + 100.0 * (t >= 0.1)
 
 
-def one_fmu(dt: float, effects: dict) -> np.ndarray:
+def one_fmu(dt: float, effects: dict, kind: str) -> np.ndarray:
     from cosim import FmuPlant, build_fmu
 
     n = int(round(DURATION / dt))
     t = dt * np.arange(n)
     with FmuPlant(build_fmu(), dt=dt, parameters=effects, outputs=list(STATES)) as plant:
-        return np.vstack([plant.read_outputs(), plant.run(np.c_[torque(t), np.zeros(n)])])
+        return np.vstack([plant.read_outputs(), plant.run(np.c_[torque(t, kind), np.zeros(n)])])
 
 
-def split(dt: float, effects: dict, **master) -> tuple[np.ndarray, float, str]:
+def split(dt: float, effects: dict, kind: str, **master) -> tuple[np.ndarray, float, str]:
     from cosim.plant.build import build_ssp
     from cosim.plant.system_plant import SystemPlant
 
@@ -59,7 +65,7 @@ def split(dt: float, effects: dict, **master) -> tuple[np.ndarray, float, str]:
     with SystemPlant(build_ssp(), dt=dt, parameters=parameters, outputs=list(SYSTEM_NAMES), **master) as plant:
         first = plant.read_outputs()
         start = time.perf_counter()
-        y = plant.run(np.c_[torque(t), np.zeros(n)])
+        y = plant.run(np.c_[torque(t, kind), np.zeros(n)])
         return np.vstack([first, y]), (time.perf_counter() - start) / n, plant.engine
 
 
@@ -70,20 +76,20 @@ def errors(y: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 def measure() -> dict:
     result = {"steps": list(STEPS), "study_dt": STUDY_DT, "duration": DURATION, "cases": {}}
-    for label, effects in EFFECTS.items():
-        references = {dt: one_fmu(dt, effects) for dt in (*STEPS, STUDY_DT)}
+    for label, (effects, kind) in CASES.items():
+        references = {dt: one_fmu(dt, effects, kind) for dt in (*STEPS, STUDY_DT)}
         rows = []
         for algorithm in ("jacobi", "gauss-seidel"):
             for order in (0, 1, 2):
                 errs, costs = [], []
                 for dt in STEPS:
-                    y, cost, engine = split(dt, effects, algorithm=algorithm, extrapolation=order)
+                    y, cost, engine = split(dt, effects, kind, algorithm=algorithm, extrapolation=order)
                     errs.append(float(np.max(errors(y, references[dt]))))
                     costs.append(cost)
                 rows.append({"algorithm": algorithm, "extrapolation": order, "errors": errs,
                              "orders": [float(np.log2(a / b)) for a, b in zip(errs, errs[1:], strict=False)],
                              "step_us": 1e6 * float(np.median(costs)), "engine": engine})
-        y, _, engine = split(STUDY_DT, effects)
+        y, _, engine = split(STUDY_DT, effects, kind)
         e = errors(y, references[STUDY_DT])
         result["cases"][label] = {"effects": effects, "rows": rows,
                                   "default_at_study_dt": dict(zip(STATES, map(float, e), strict=True))}
@@ -93,7 +99,8 @@ def measure() -> dict:
 def markdown(result: dict, commit: str) -> str:
     lines = ["# The system master's accuracy: the split servo against the one-FMU servo", "",
              f"`python benchmarks/bench_coupling.py` at {commit}, {platform.machine()}, {time.strftime('%Y-%m-%d')}. "
-             f"Both driven {result['duration']:g} s by the same held torque (a step and a 2 Hz sine); error: the "
+             f"Both driven {result['duration']:g} s by the same held torque (a step and a 2 Hz sine, or a random "
+             "staircase); error: the "
              "largest difference over the run, over the one-FMU servo's range, the worst of the four states. Order: "
              "log2 of the ratio of successive errors (the step halves).", ""]
     for label, case in result["cases"].items():

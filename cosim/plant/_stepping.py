@@ -269,6 +269,7 @@ class _Stepping:
         outputs = self.read_outputs()
         message = self._messages[-1] if self._messages else ""
         self.step = self._after_end
+        self._loop = None
         raise SimulationTerminated(f"{self.path.name} ended the simulation at t={at:.9g} s"
                                    + (f": {message}" if message else ""), time=at, message=message,
                                    outputs=outputs)

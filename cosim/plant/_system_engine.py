@@ -143,7 +143,7 @@ class CEngine:
                          len(self._pick_comp), _pointer(self._pick_comp, _I), _pointer(self._pick_index, _I))
         self._sync()
         if done < n_steps:
-            self._raise(u[done], y[:done])
+            self._raise(y[:done])
         return y
 
     def _sync(self) -> None:
@@ -153,26 +153,36 @@ class CEngine:
             plant.components[n]._counter[0] = self._comps[i].k
         plant._k = self.master.k
 
-    def _raise(self, row: np.ndarray, completed: np.ndarray) -> None:
+    def _raise(self, completed: np.ndarray) -> None:
         from ..errors import InvalidSettingError, SimulationTerminated
 
         m = self.master
         name = self._names[m.failed_comp]
-        p = self.plant.components[name]
         if m.status == -2:
             raise InvalidSettingError(f"component {name}: an input is not finite at t={m.failed_time:.9g} s (a "
                                       "connected output diverged)")
-        if m.failed_call == 1:  # doStep: the FMU may have ended the simulation; FmuPlant tells which
-            try:
-                p._ended(m.status, m.failed_time)
-            except SimulationTerminated as exc:
-                ended = SimulationTerminated(f"component {name}: {exc}", time=exc.time, message=exc.message,
-                                             outputs=None)
-                ended.completed = completed
-                raise ended from None
-        calls = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if p.fmi_version == "2.0" else (
-            "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
-        p._raise_call_error(calls[m.failed_call], m.status, m.failed_time)
+        try:
+            _raise_call(self.plant.components[name], self._comps[m.failed_comp], m.failed_call, m.status,
+                        m.failed_time)
+        except SimulationTerminated as exc:  # the component ended the simulation: the system's run ends there
+            ended = SimulationTerminated(f"component {name}: {exc}", time=exc.time, message=exc.message, outputs=None)
+            ended.completed = completed
+            raise ended from None
+
+
+_CALLS = {"2.0": ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"),
+          "3.0": ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")}
+
+
+def _raise_call(p: Any, c: _Comp, call: int, status: int, t: float) -> None:
+    """Raise what FmuPlant's Python step raises when its `call` (0 set, 1 doStep, 2 get) failed with `status` at
+    `t`: a doStep may have ended the simulation (FmuPlant._ended tells, from FMI 3's flags as the C loop left them)."""
+    if call == 1:
+        if p.fmi_version != "2.0":
+            flags, last_time = p._step_flags
+            flags[1].value, flags[2].value, last_time.value = c.terminated, c.early, c.last_time
+        p._ended(status, t)
+    p._raise_call_error(_CALLS[p.fmi_version][call], status, t)
 
 
 class SingleLoop:
@@ -216,15 +226,7 @@ class SingleLoop:
         m.k = c.k = k  # where the step failed (FmuPlant's counter says the same)
         if m.status == -2:
             p._nonfinite_input(t)
-        v2 = p.fmi_version == "2.0"
-        names = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal") if v2 else ("fmi3SetFloat64", "fmi3DoStep",
-                                                                         "fmi3GetFloat64")
-        if m.failed_call == 1:
-            if not v2:  # the flags FmuPlant._ended reads, as its Python step would have left them
-                flags, last_time = p._step_flags
-                flags[1].value, flags[2].value, last_time.value = c.terminated, c.early, c.last_time
-            p._ended(m.status, t)
-        p._raise_call_error(names[m.failed_call], m.status, t + (p.dt if m.failed_call == 2 else 0.0))
+        _raise_call(p, c, m.failed_call, m.status, t + (p.dt if m.failed_call == 2 else 0.0))
 
 
 def single_loop(plant: Any) -> SingleLoop | None:

@@ -528,8 +528,8 @@ class FmuPlant(_Stepping):
             bad = int(np.argwhere(~np.isfinite(u))[0][0])
             raise InvalidSettingError(f"input row {bad} is not finite ({u[bad]}); inputs must be finite")
         y = np.empty((u.shape[0], len(self.outputs)))
-        loop = self._loop
-        if loop is not None and self.step.__name__ == "step":  # every step in one call of the C loop
+        loop = self._loop  # None once the FMU ended the run or the plant is closed
+        if loop is not None:  # every step in one call of the C loop
             k = self._counter[0]
             done = loop.run(u, y)
             self._counter[0] = k + done
@@ -565,7 +565,7 @@ class FmuPlant(_Stepping):
         """Terminate and free the instance, unload the library and delete the extracted files. Idempotent."""
         fmu, self._fmu = self._fmu, None
         # The library is unloaded below: the bound function pointers must never be called again.
-        self.step = self._call_get = self._closed
+        self.step, self._call_get, self._loop = self._closed, self._closed, None
         if fmu is not None:
             try:
                 if self._initialized:

@@ -249,10 +249,12 @@ def check_names(wiring: Wiring, names: list[str], role: str) -> None:
         if pool is not None and n not in pool:
             raise UnknownVariableError(f"{n} is not a free input of the system.{_close_matches(n, pool)}")
     if role != "input":
+        signals: dict[str, Any] = {}  # each component's signals, expanded once
         for n in names:
             comp, var = split_name(n, wiring.system.components, what=role)
-            sig = expand_signals(wiring.descriptions[comp].modelVariables).get(var)
-            if sig is None:
+            if comp not in signals:
+                signals[comp] = expand_signals(wiring.descriptions[comp].modelVariables)
+            if var not in signals[comp]:
                 raise UnknownVariableError(f"{n}: component {comp} has no variable {var}")
 
 
